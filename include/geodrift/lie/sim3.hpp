@@ -1,0 +1,241 @@
+#pragma once
+
+/// @file
+/// Sim(3), similarity transforms S = [s·R t; 0 1] acting on points as p' = s·R·p + t.
+/// Tangent ξ = (ω, σ, ν) ∈ R⁷, σ = log s (DESIGN.md, the paper's order). All Jacobians are
+/// w.r.t. LEFT perturbations S ← exp(δ)·S. The left Jacobian and its inverse are exact (no
+/// first-order shortcut): see detail/sim3_details.hpp for the derivation.
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+#include <cmath>
+
+#include "geodrift/error.hpp"
+#include "geodrift/lie/detail/sim3_details.hpp"
+#include "geodrift/lie/detail/so3_details.hpp"
+#include "geodrift/lie/lie_group_base.hpp"
+#include "geodrift/lie/se3.hpp"
+#include "geodrift/lie/so3.hpp"
+
+namespace geodrift::lie {
+
+/// Similarity transform S = [s·R t; 0 1] acting on points as p' = s·R·p + t.
+/// Tangent ξ = (ω, σ, ν) ∈ R⁷, σ = log(s); offsets kOmega = 0, kSigma = 3, kNu = 4.
+/// exp(ξ) = [e^σ·exp(ω)  C(ω,σ)·ν; 0 1] with C = ∫₀¹ e^{uσ} exp(u[ω]x) du.
+/// All Jacobians are w.r.t. LEFT perturbations S ← exp(δ)·S.
+template <typename Scalar>
+class Sim3 : public LieGroupBase<Sim3<Scalar>> {
+ public:
+  static constexpr int kDoF = 7;
+  static constexpr int kOmega = 0, kSigma = 3, kNu = 4;  ///< tangent block offsets
+  static constexpr const char* kName = "Sim3";
+  using Tangent = Eigen::Matrix<Scalar, kDoF, 1>;
+  using Jacobian = Eigen::Matrix<Scalar, kDoF, kDoF>;
+  using Point = Eigen::Matrix<Scalar, 3, 1>;
+  using Matrix = Eigen::Matrix<Scalar, 4, 4>;
+
+  /// Identity.
+  Sim3() = default;
+
+  /// S = [scale·R t; 0 1].
+  /// @throws InvalidArgument if scale ≤ 0 or t / scale is non-finite.
+  Sim3(const SO3<Scalar>& R, const Point& t, Scalar scale) : R_(R), t_(t), s_(scale) {
+    GEODRIFT_CHECK(t.allFinite(), "Sim3: translation " << t.transpose() << " is not finite");
+    GEODRIFT_CHECK(std::isfinite(scale) && scale > Scalar(0),
+                   "Sim3: scale " << scale << " is not a finite value > 0");
+  }
+
+  /// SE3 → Sim3 with scale 1.
+  explicit Sim3(const SE3<Scalar>& T) : R_(T.rotation()), t_(T.translation()) {}
+
+  /// Sim3 → SE3 as after pose-graph optimisation (Strasdat 2010, ORB-SLAM; DESIGN.md):
+  /// [R | t/s]. For a world→camera S_cw this keeps the camera centre c = −(1/s)·Rᵀt and the
+  /// orientation, and expresses the pose in the metric of the corrected map.
+  SE3<Scalar> to_se3() const { return SE3<Scalar>(R_, t_ / s_); }
+
+  /// exp: sim(3) → Sim(3).
+  /// @param xi (ω, σ, ν).
+  /// @param J_S_xi (7x7, optional) = left Jacobian Jl(ξ) (see left_jacobian()).
+  /// @throws InvalidArgument if xi is non-finite.
+  static Sim3 exp(const Tangent& xi, Jacobian* J_S_xi = nullptr) {
+    using std::exp;
+    GEODRIFT_CHECK(xi.allFinite(), "Sim3::exp: xi " << xi.transpose() << " is not finite");
+    if (J_S_xi) {
+      *J_S_xi = left_jacobian(xi);
+      return Sim3(SO3<Scalar>::exp(xi.template segment<3>(kOmega)),
+                  J_S_xi->template block<3, 3>(kNu, kNu) * xi.template segment<3>(kNu),
+                  exp(xi[kSigma]), Raw{});
+    }
+    const Point omega = xi.template segment<3>(kOmega);
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), xi[kSigma], false);
+    return Sim3(SO3<Scalar>::exp(omega), v_matrix(omega, c) * xi.template segment<3>(kNu),
+                exp(xi[kSigma]), Raw{});
+  }
+
+  /// log: Sim(3) → sim(3), θ ∈ [0, π], σ = log s, ν = C(ω,σ)⁻¹·t.
+  /// @param J_xi_S (7x7, optional) = Jl⁻¹(log S): d(log S)/dδ for S ← exp(δ)·S.
+  Tangent log(Jacobian* J_xi_S = nullptr) const {
+    using std::log;
+    const Point omega = R_.log();
+    const Scalar sigma = log(s_);
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), sigma, false);
+    // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
+    Tangent xi;
+    xi.template segment<3>(kOmega) = omega;
+    xi[kSigma] = sigma;
+    xi.template segment<3>(kNu) = v_matrix(omega, c).inverse() * t_;
+    if (J_xi_S) *J_xi_S = left_jacobian_inverse(xi);
+    return xi;
+  }
+
+  /// S⁻¹ = [Rᵀ/s  −Rᵀt/s; 0 1].  @param J_inv_S (7x7, optional) = −Ad(S⁻¹).
+  Sim3 inverse(Jacobian* J_inv_S = nullptr) const {
+    const SO3<Scalar> Rinv = R_.inverse();
+    const Scalar sinv = Scalar(1) / s_;
+    const Sim3 inv(Rinv, -sinv * Rinv.act(t_), sinv, Raw{});
+    if (J_inv_S) *J_inv_S = -inv.adjoint();
+    return inv;
+  }
+
+  /// Composition a·b = [R_a R_b, s_a R_a t_b + t_a, s_a s_b].
+  Sim3 operator*(const Sim3& b) const {
+    return Sim3(R_ * b.R_, s_ * R_.act(b.t_) + t_, s_ * b.s_, Raw{});
+  }
+
+  /// Composition a·b with Jacobians w.r.t. left perturbations of a and b.
+  /// @param J_ab_a (7x7, optional) = I.   @param J_ab_b (7x7, optional) = Ad(a).
+  Sim3 compose(const Sim3& b, Jacobian* J_ab_a = nullptr, Jacobian* J_ab_b = nullptr) const {
+    if (J_ab_a) J_ab_a->setIdentity();
+    if (J_ab_b) *J_ab_b = adjoint();
+    return *this * b;
+  }
+
+  /// p' = s·R·p + t.
+  /// @param J_p_S (3x7, optional) = [ −[p']x | p' | I ] in (ω, σ, ν) order.
+  /// @param J_p_p (3x3, optional) = s·R.
+  Point act(const Point& p, Eigen::Matrix<Scalar, 3, kDoF>* J_p_S = nullptr,
+            Eigen::Matrix<Scalar, 3, 3>* J_p_p = nullptr) const {
+    const Point q = s_ * R_.act(p) + t_;
+    if (J_p_S) *J_p_S << -skew<Scalar>(q), q, Eigen::Matrix<Scalar, 3, 3>::Identity();
+    if (J_p_p) *J_p_p = s_ * R_.matrix();
+    return q;
+  }
+
+  /// Ad(S) with S·exp(d)·S⁻¹ = exp(Ad(S)·d); rows/cols (ω, σ, ν):
+  ///   [ R       0    0   ]
+  ///   [ 0       1    0   ]
+  ///   [ [t]x·R  −t   s·R ]
+  Jacobian adjoint() const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    Jacobian A = Jacobian::Zero();
+    A.template block<3, 3>(kOmega, kOmega) = R;
+    A(kSigma, kSigma) = Scalar(1);
+    A.template block<3, 3>(kNu, kOmega) = skew<Scalar>(t_) * R;
+    A.template block<3, 1>(kNu, kSigma) = -t_;
+    A.template block<3, 3>(kNu, kNu) = s_ * R;
+    return A;
+  }
+
+  /// Exact left Jacobian Jl(ξ) = Σ_k ad_ξᵏ/(k+1)!, exp(ξ + dξ) = exp(Jl·dξ)·exp(ξ); rows/cols
+  /// (ω, σ, ν):
+  ///   [ J   0   0 ]     J = Jl_SO3(ω),  C = c0·I + c1·W + c2·W²  (W = [ω]x),
+  ///   [ 0   1   0 ]     A = ∂(Cν)/∂ω + [Cν]x·J,
+  ///   [ A   b   C ]     b = ∂(Cν)/∂σ − Cν,
+  /// with the coupled (θ, σ) coefficients and their exact derivatives from
+  /// detail::sim3_coeffs (closed forms; series near θ = 0, σ = 0 and both).
+  static Jacobian left_jacobian(const Tangent& xi) {
+    Jacobian Jl;
+    blocks(xi, &Jl, nullptr);
+    return Jl;
+  }
+
+  /// Exact inverse of left_jacobian(ξ) by block inversion of its lower-triangular form:
+  ///   [ J⁻¹          0       0   ]
+  ///   [ 0            1       0   ]
+  ///   [ −C⁻¹·A·J⁻¹   −C⁻¹·b  C⁻¹ ]    (J⁻¹ closed form; C⁻¹ exact 3x3 cofactor inverse).
+  static Jacobian left_jacobian_inverse(const Tangent& xi) {
+    Jacobian Jli;
+    blocks(xi, nullptr, &Jli);
+    return Jli;
+  }
+
+  /// The 4x4 matrix [s·R t; 0 1].
+  Matrix matrix() const {
+    Matrix M = Matrix::Identity();
+    M.template topLeftCorner<3, 3>() = s_ * R_.matrix();
+    M.template topRightCorner<3, 1>() = t_;
+    return M;
+  }
+  /// Rotation part R.
+  const SO3<Scalar>& rotation() const { return R_; }
+  /// Translation part t.
+  const Point& translation() const { return t_; }
+  /// Scale s = e^σ > 0.
+  Scalar scale() const { return s_; }
+
+  /// Same transform in another scalar type.
+  template <typename T>
+  Sim3<T> cast() const {
+    return Sim3<T>(R_.template cast<T>(), t_.template cast<T>(), static_cast<T>(s_));
+  }
+
+  /// True when rotations agree to tol (rad), |log s − log s_other| ≤ tol and
+  /// |t − t_other| ≤ tol·max(1, |t|, |t_other|).
+  bool is_approx(const Sim3& other,
+                 Scalar tol = Eigen::NumTraits<Scalar>::dummy_precision()) const {
+    using std::abs;
+    using std::log;
+    using std::max;
+    const Scalar mag = max(Scalar(1), max(t_.norm(), other.t_.norm()));
+    return R_.is_approx(other.R_, tol) && abs(log(s_ / other.s_)) <= tol &&
+           (t_ - other.t_).norm() <= tol * mag;
+  }
+
+ private:
+  struct Raw {};  // internal: inputs known valid
+  Sim3(const SO3<Scalar>& R, const Point& t, Scalar s, Raw) : R_(R), t_(t), s_(s) {}
+
+  static Eigen::Matrix<Scalar, 3, 3> v_matrix(const Point& omega,
+                                              const detail::VCoeffs<Scalar>& c) {
+    const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
+    return c.c0 * Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
+  }
+
+  // Fills Jl and/or Jl⁻¹ (either may be null) from one evaluation of the coefficients.
+  static void blocks(const Tangent& xi, Jacobian* Jl, Jacobian* Jli) {
+    const Point omega = xi.template segment<3>(kOmega);
+    const Point nu = xi.template segment<3>(kNu);
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), xi[kSigma], true);
+    const Eigen::Matrix<Scalar, 3, 3> J = detail::so3_left_jacobian<Scalar>(omega);
+    Eigen::Matrix<Scalar, 3, 3> A;
+    Point b;
+    const Eigen::Matrix<Scalar, 3, 3> C = detail::translation_rows<Scalar>(omega, nu, c, J, &A, &b);
+    if (Jl) {
+      Jl->setZero();
+      Jl->template block<3, 3>(kOmega, kOmega) = J;
+      (*Jl)(kSigma, kSigma) = Scalar(1);
+      Jl->template block<3, 3>(kNu, kOmega) = A;
+      Jl->template block<3, 1>(kNu, kSigma) = b;
+      Jl->template block<3, 3>(kNu, kNu) = C;
+    }
+    if (Jli) {
+      const Eigen::Matrix<Scalar, 3, 3> Ji = detail::so3_left_jacobian_inverse<Scalar>(omega);
+      const Eigen::Matrix<Scalar, 3, 3> Ci = C.inverse();
+      Jli->setZero();
+      Jli->template block<3, 3>(kOmega, kOmega) = Ji;
+      (*Jli)(kSigma, kSigma) = Scalar(1);
+      Jli->template block<3, 3>(kNu, kOmega) = -Ci * A * Ji;
+      Jli->template block<3, 1>(kNu, kSigma) = -Ci * b;
+      Jli->template block<3, 3>(kNu, kNu) = Ci;
+    }
+  }
+
+  SO3<Scalar> R_;
+  Point t_ = Point::Zero();
+  Scalar s_ = Scalar(1);
+};
+
+using Sim3d = Sim3<double>;
+using Sim3f = Sim3<float>;
+
+}  // namespace geodrift::lie
