@@ -1,0 +1,27 @@
+#pragma once
+
+#include <Eigen/Core>
+
+#include "geodrift/lie/se3.hpp"
+
+namespace geodrift::map {
+
+/// A map-to-world correspondence (the paper's C_map-world, Sec. 3.3): one localized geo VIEW.
+/// Each of a panorama's 8 views may localize on its own and then carries the panorama's
+/// geo-tag. The view's pose is known in M only relative to the keyframe it was localized
+/// against; that keyframe bounds the PGO window (DESIGN.md, Correction step 2).
+struct Correspondence {
+  int id = 0;
+  int keyframe = -1;  ///< Keyframe::id the view was localized against
+  /// Fixed relative pose keyframe -> view in M's units: T_vw = T_vk · T_kw (view maps M points
+  /// into its camera frame through the keyframe's pose). Identity for a GNSS fix at the
+  /// keyframe's own camera centre.
+  lie::SE3d T_vk;
+  Eigen::Vector3d y_w = Eigen::Vector3d::Zero();  ///< geo-tag position in W (metres)
+  double sigma_m = 1.0;         ///< standard deviation of y_w, metres (BA geo-term weight)
+  int geotag_id = -1;           ///< GeoTag::id, -1 when the anchor came without one
+  int inliers = 0;              ///< PnP inlier count (0 for anchors read from a file)
+  double reprojection_rms = 0;  ///< pixels
+};
+
+}  // namespace geodrift::map

@@ -1,0 +1,19 @@
+#pragma once
+
+#include <limits>
+
+namespace geodrift::map {
+
+/// The geo-tag of an image (a panorama, a photo or a GNSS fix). Latitude and longitude are in
+/// degrees (named `_deg`, as GeographicLib takes them); height is ellipsoidal, in metres;
+/// `heading` is the clockwise bearing from true north of the view's optical axis in radians,
+/// NaN when unknown.
+struct GeoTag {
+  int id = 0;
+  double latitude_deg = 0.0;
+  double longitude_deg = 0.0;
+  double height = 0.0;
+  double heading = std::numeric_limits<double>::quiet_NaN();
+};
+
+}  // namespace geodrift::map
