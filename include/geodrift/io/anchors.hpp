@@ -1,0 +1,329 @@
+#pragma once
+
+/// @file
+/// Anchors CSV (`--anchors`, DESIGN.md "Command line and files"): the world positions of a few
+/// frames of the trajectory (geo-tags, GNSS fixes, surveyed points).
+///
+/// Format: comma-separated, one header row naming the columns (any order, case-sensitive),
+/// then one anchor per row. Blank lines and lines starting with '#' are skipped. Columns:
+///   time      `frame` (integer frame index) and/or `timestamp` (seconds); at least one;
+///   position  exactly ONE of these groups, complete:
+///               `latitude,longitude,height`   degrees, degrees, ellipsoidal metres (WGS84)
+///               `easting,northing,zone,height` UTM metres, zone like "32N", ellipsoidal metres
+///               `x,y,z`                        W itself, metres (geo::LocalFrame)
+///   optional  `sigma_m` (standard deviation of the position, metres, > 0) and `heading_deg`
+///             (true heading of the view, degrees clockwise from true north).
+/// Heights are ellipsoidal (DESIGN.md); a `height_msl` column is rejected with a message saying
+/// so, as geodrift does not ship a geoid model. An empty `frame` or `timestamp` field means
+/// "unknown" (each row needs one of them); an empty `sigma_m` or `heading_deg` means "not
+/// given". A literal nan/inf is always an error.
+///
+/// Errors: InvalidArgument "<path>:<line>: <what>" for an unknown or duplicated column, mixed or
+/// incomplete position columns, no time column, a short or long row, a field that is not a
+/// number or not finite, a bad zone string, latitude/longitude out of range, sigma_m ≤ 0, a
+/// position outside W's UTM zone; Error for a missing file.
+
+#include <Eigen/Core>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "geodrift/error.hpp"
+#include "geodrift/geo/local_frame.hpp"
+#include "geodrift/geo/utm.hpp"
+#include "geodrift/io/detail/text_io.hpp"
+#include "geodrift/version.hpp"
+
+namespace geodrift::io {
+
+/// Which position columns an anchors file uses.
+enum class AnchorPositionKind { kGeodetic, kUtm, kWorld };
+
+/// One anchor row as written in the file (before conversion to W).
+struct AnchorRecord {
+  int line = 0;    ///< 1-based line in the file
+  int frame = -1;  ///< frame index, -1 when the file has no `frame` column
+  double timestamp = std::numeric_limits<double>::quiet_NaN();  ///< NaN without `timestamp`
+  /// (latitude_deg, longitude_deg, height) | (easting, northing, height) | (x, y, z).
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  int zone = 0;                                                   ///< UTM zone (kUtm only)
+  bool northp = true;                                             ///< UTM hemisphere (kUtm only)
+  double sigma_m = std::numeric_limits<double>::quiet_NaN();      ///< NaN when not given
+  double heading_deg = std::numeric_limits<double>::quiet_NaN();  ///< NaN when not given
+};
+
+/// An anchors file as read.
+struct AnchorTable {
+  std::string path;
+  AnchorPositionKind kind = AnchorPositionKind::kGeodetic;
+  bool has_frame = false;
+  bool has_timestamp = false;
+  bool has_sigma = false;
+  bool has_heading = false;
+  std::vector<AnchorRecord> records;
+};
+
+/// An anchor converted to W.
+struct Anchor {
+  int line = 0;    ///< line in the source file (0 when built in memory)
+  int frame = -1;  ///< frame index, -1 when unknown
+  double timestamp = std::numeric_limits<double>::quiet_NaN();  ///< seconds, NaN when unknown
+  Eigen::Vector3d y_w = Eigen::Vector3d::Zero();                ///< position in W, metres
+  double sigma_m = std::numeric_limits<double>::quiet_NaN();    ///< metres, NaN when not given
+  /// True heading of the view (rad, clockwise from true north, [0, 2π)), NaN when not given.
+  double heading = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// Reads an anchors CSV (see the file comment for the format and every error).
+/// @throws Error if the file cannot be opened; InvalidArgument "<path>:<line>: <what>".
+inline AnchorTable read_anchors_csv(const std::string& path) {
+  detail::LineReader reader(path);
+  AnchorTable table;
+  table.path = path;
+  std::map<std::string, std::size_t> col;  // column name -> index
+  std::size_t num_cols = 0;
+  int header_line = 0;
+  std::string raw;
+  static const char* kKnown[] = {"frame",   "timestamp", "latitude",   "longitude", "height",
+                                 "easting", "northing",  "zone",       "x",         "y",
+                                 "z",       "sigma_m",   "heading_deg"};
+  while (reader.next(&raw)) {
+    const std::string text = detail::trim(raw);
+    if (text.empty() || text[0] == '#') continue;
+    const int line = reader.line();
+    const std::vector<std::string> fields = detail::split_csv(text);
+    if (header_line == 0) {
+      header_line = line;
+      num_cols = fields.size();
+      for (std::size_t i = 0; i < fields.size(); ++i) {
+        const std::string& name = fields[i];
+        if (name == "height_msl") {
+          detail::parse_error(path, line,
+                              "column 'height_msl' (height above mean sea level) is not "
+                              "supported: give the ellipsoidal height in a 'height' column");
+        }
+        bool known = false;
+        for (const char* k : kKnown) known = known || name == k;
+        if (!known) {
+          detail::parse_error(
+              path, line,
+              "unknown column '" + name +
+                  "' (expected frame/timestamp; latitude,longitude,height or "
+                  "easting,northing,zone,height or x,y,z; optional sigma_m, heading_deg)");
+        }
+        if (!col.emplace(name, i).second)
+          detail::parse_error(path, line, "column '" + name + "' appears twice");
+      }
+      const auto has = [&](const char* c) { return col.count(c) != 0; };
+      table.has_frame = has("frame");
+      table.has_timestamp = has("timestamp");
+      table.has_sigma = has("sigma_m");
+      table.has_heading = has("heading_deg");
+      if (!table.has_frame && !table.has_timestamp)
+        detail::parse_error(path, line, "no 'frame' or 'timestamp' column");
+      const bool geod = has("latitude") || has("longitude");
+      const bool utm = has("easting") || has("northing") || has("zone");
+      const bool world = has("x") || has("y") || has("z");
+      if (int(geod) + int(utm) + int(world) > 1) {
+        detail::parse_error(path, line,
+                            "mixed position columns: use exactly one of latitude,longitude,height "
+                            "or easting,northing,zone,height or x,y,z");
+      }
+      if (geod) {
+        table.kind = AnchorPositionKind::kGeodetic;
+        for (const char* c : {"latitude", "longitude", "height"})
+          if (!has(c))
+            detail::parse_error(
+                path, line,
+                std::string("missing column '") + c + "' (latitude,longitude,height go together)");
+      } else if (utm) {
+        table.kind = AnchorPositionKind::kUtm;
+        for (const char* c : {"easting", "northing", "zone", "height"})
+          if (!has(c))
+            detail::parse_error(path, line,
+                                std::string("missing column '") + c +
+                                    "' (easting,northing,zone,height go together)");
+      } else if (world) {
+        table.kind = AnchorPositionKind::kWorld;
+        if (has("height"))
+          detail::parse_error(path, line, "column 'height' does not go with x,y,z (use z)");
+        for (const char* c : {"x", "y", "z"})
+          if (!has(c))
+            detail::parse_error(path, line,
+                                std::string("missing column '") + c + "' (x,y,z go together)");
+      } else {
+        detail::parse_error(path, line,
+                            "no position columns (latitude,longitude,height or "
+                            "easting,northing,zone,height or x,y,z)");
+      }
+      continue;
+    }
+
+    if (fields.size() != num_cols) {
+      detail::parse_error(path, line,
+                          "row has " + std::to_string(fields.size()) + " fields, the header has " +
+                              std::to_string(num_cols));
+    }
+    const auto num = [&](const char* c) {
+      return detail::parse_double(fields[col.at(c)], path, line, c);
+    };
+    AnchorRecord r;
+    r.line = line;
+    // An empty frame or timestamp field means "unknown" (one of the two must be given); an
+    // empty sigma_m or heading_deg means "not given". NaN written out is never accepted.
+    const auto empty = [&](const char* c) { return col.count(c) && fields[col.at(c)].empty(); };
+    if (table.has_frame && !empty("frame"))
+      r.frame =
+          static_cast<int>(detail::parse_int(fields[col.at("frame")], path, line, "frame", 0));
+    if (table.has_timestamp && !empty("timestamp")) r.timestamp = num("timestamp");
+    if (r.frame < 0 && !std::isfinite(r.timestamp))
+      detail::parse_error(path, line, "row gives neither a frame nor a timestamp");
+    switch (table.kind) {
+      case AnchorPositionKind::kGeodetic: {
+        r.position = Eigen::Vector3d(num("latitude"), num("longitude"), num("height"));
+        if (!(r.position.x() >= -90.0 && r.position.x() <= 90.0))
+          detail::parse_error(path, line,
+                              "latitude " + detail::fmt(r.position.x()) + " deg outside [-90, 90]");
+        if (!(r.position.y() >= -180.0 && r.position.y() <= 180.0))
+          detail::parse_error(
+              path, line, "longitude " + detail::fmt(r.position.y()) + " deg outside [-180, 180]");
+        break;
+      }
+      case AnchorPositionKind::kUtm: {
+        r.position = Eigen::Vector3d(num("easting"), num("northing"), num("height"));
+        try {
+          geo::parse_utm_zone(fields[col.at("zone")], &r.zone, &r.northp);
+        } catch (const InvalidArgument& e) {
+          detail::parse_error(path, line, e.what());
+        }
+        break;
+      }
+      case AnchorPositionKind::kWorld:
+        r.position = Eigen::Vector3d(num("x"), num("y"), num("z"));
+        break;
+    }
+    if (table.has_sigma && !empty("sigma_m")) {
+      r.sigma_m = num("sigma_m");
+      if (!(r.sigma_m > 0.0))
+        detail::parse_error(path, line, "sigma_m " + detail::fmt(r.sigma_m) + " must be > 0");
+    }
+    if (table.has_heading && !empty("heading_deg")) r.heading_deg = num("heading_deg");
+    table.records.push_back(r);
+  }
+  if (header_line == 0) detail::parse_error(path, reader.line(), "no header row");
+  if (table.records.empty()) detail::parse_error(path, reader.line(), "no anchor rows");
+  return table;
+}
+
+/// A LocalFrame for anchors given as latitude/longitude or UTM: the origin is the first anchor
+/// (its standard zone for latitude/longitude, its own zone for UTM).
+/// @throws InvalidArgument for x,y,z anchors (W must then be given by the caller).
+inline geo::LocalFrame local_frame_at_first_anchor(const AnchorTable& table) {
+  GEODRIFT_CHECK(!table.records.empty(), table.path << ": no anchors");
+  const AnchorRecord& r = table.records.front();
+  try {
+    switch (table.kind) {
+      case AnchorPositionKind::kGeodetic:
+        return geo::LocalFrame::from_geodetic(r.position.x(), r.position.y(), r.position.z());
+      case AnchorPositionKind::kUtm:
+        return geo::LocalFrame::from_utm(r.zone, r.northp, r.position.x(), r.position.y(),
+                                         r.position.z());
+      case AnchorPositionKind::kWorld:
+        break;
+    }
+  } catch (const InvalidArgument& e) {
+    detail::parse_error(table.path, r.line, e.what());
+  }
+  detail::parse_error(table.path, r.line,
+                      "anchors are given as x,y,z in W: the world frame (UTM zone and origin) "
+                      "must be given separately");
+}
+
+/// Converts the anchors to W through `frame`; heading_deg becomes radians in [0, 2π).
+/// @throws InvalidArgument "<path>:<line>: <what>" when a position cannot be expressed in W
+///         (outside the zone's range, UTM outside its range).
+inline std::vector<Anchor> anchors_in_world(const AnchorTable& table,
+                                            const geo::LocalFrame& frame) {
+  std::vector<Anchor> out;
+  out.reserve(table.records.size());
+  for (const AnchorRecord& r : table.records) {
+    Anchor a;
+    a.line = r.line;
+    a.frame = r.frame;
+    a.timestamp = r.timestamp;
+    a.sigma_m = r.sigma_m;
+    if (std::isfinite(r.heading_deg))
+      a.heading = geo::detail::wrap_to_two_pi(r.heading_deg * geo::detail::kDegToRad);
+    try {
+      switch (table.kind) {
+        case AnchorPositionKind::kGeodetic:
+          a.y_w = frame.to_world(r.position.x(), r.position.y(), r.position.z());
+          break;
+        case AnchorPositionKind::kUtm:
+          a.y_w = frame.to_world(
+              geo::UtmCoordinate{r.position.x(), r.position.y(), r.zone, r.northp, r.position.z()});
+          break;
+        case AnchorPositionKind::kWorld:
+          a.y_w = r.position;
+          break;
+      }
+    } catch (const InvalidArgument& e) {
+      detail::parse_error(table.path, r.line, e.what());
+    }
+    out.push_back(a);
+  }
+  return out;
+}
+
+/// Reads an anchors CSV and converts it to W in one call.
+inline std::vector<Anchor> read_anchors(const std::string& path, const geo::LocalFrame& frame) {
+  return anchors_in_world(read_anchors_csv(path), frame);
+}
+
+/// Writes anchors as CSV with columns
+/// frame,timestamp,latitude,longitude,height,sigma_m,heading_deg (readable by
+/// read_anchors_csv; the frame/timestamp columns only when some anchor has one), positions
+/// converted from W through `frame`, after a '#' line stating frame, units and version. Unknown
+/// values (frame -1, NaN timestamp/sigma/heading) are written as empty fields.
+/// @throws InvalidArgument for an anchor without frame and timestamp or outside W's zone; Error
+///         on I/O failure.
+inline void write_anchors_csv(const std::string& path, const std::vector<Anchor>& anchors,
+                              const geo::LocalFrame& frame) {
+  std::vector<geo::Geodetic> g;
+  g.reserve(anchors.size());
+  bool any_time = false;
+  for (const Anchor& a : anchors) {
+    g.push_back(frame.to_geodetic(a.y_w));
+    any_time = any_time || std::isfinite(a.timestamp);
+  }
+  for (std::size_t i = 0; i < anchors.size(); ++i) {
+    GEODRIFT_CHECK(anchors[i].frame >= 0 || std::isfinite(anchors[i].timestamp),
+                   "write_anchors_csv: anchor " << i << " has neither frame nor timestamp");
+  }
+  bool any_frame = false;
+  for (const Anchor& a : anchors) any_frame = any_frame || a.frame >= 0;
+  detail::write_atomically(path, [&](std::ostream& os) {
+    os << "# geodrift " << kVersion << " anchors: WGS84 latitude/longitude (deg), ellipsoidal "
+       << "height (m), sigma_m (m), heading_deg (deg clockwise from true north); W = UTM "
+       << frame.zone_string() << " origin E0 " << detail::fmt(frame.easting0()) << " N0 "
+       << detail::fmt(frame.northing0()) << " h0 " << detail::fmt(frame.height0()) << "\n";
+    std::string header;
+    if (any_frame) header += "frame,";
+    if (any_time) header += "timestamp,";
+    os << header << "latitude,longitude,height,sigma_m,heading_deg\n";
+    for (std::size_t i = 0; i < anchors.size(); ++i) {
+      const Anchor& a = anchors[i];
+      const auto opt = [](double v) { return std::isfinite(v) ? detail::fmt(v) : std::string(); };
+      if (any_frame) os << (a.frame >= 0 ? std::to_string(a.frame) : std::string()) << ',';
+      if (any_time) os << opt(a.timestamp) << ',';
+      os << detail::fmt(g[i].latitude_deg) << ',' << detail::fmt(g[i].longitude_deg) << ','
+         << detail::fmt(g[i].height) << ',' << opt(a.sigma_m) << ','
+         << opt(a.heading / geo::detail::kDegToRad) << '\n';
+    }
+  });
+}
+
+}  // namespace geodrift::io

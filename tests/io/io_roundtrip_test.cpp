@@ -1,0 +1,523 @@
+// Round trips of every io/ format, plus known-answer checks of each format's conventions.
+
+#include <Eigen/Geometry>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <random>
+#include <regex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "geodrift/geo/kitti.hpp"
+#include "geodrift/geo/local_frame.hpp"
+#include "geodrift/io/anchors.hpp"
+#include "geodrift/io/colmap_text.hpp"
+#include "geodrift/io/csv.hpp"
+#include "geodrift/io/geojson.hpp"
+#include "geodrift/io/kml.hpp"
+#include "geodrift/io/ply.hpp"
+#include "geodrift/io/svg.hpp"
+#include "geodrift/io/trajectory.hpp"
+#include "geodrift/version.hpp"
+#include "io_test_util.hpp"
+
+namespace io = geodrift::io;
+namespace geo = geodrift::geo;
+namespace lie = geodrift::lie;
+using geodrift::test::pose_distance;
+using geodrift::test::random_pose;
+using geodrift::test::read_text;
+using geodrift::test::TempDir;
+using geodrift::test::write_text;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+const std::string kVersionTag = std::string("geodrift ") + geodrift::kVersion;
+
+// All numbers in a string, in order.
+std::vector<double> numbers_in(const std::string& s) {
+  static const std::regex re(R"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)");
+  std::vector<double> out;
+  for (auto it = std::sregex_iterator(s.begin(), s.end(), re); it != std::sregex_iterator(); ++it)
+    out.push_back(std::stod(it->str()));
+  return out;
+}
+
+int count_of(const std::string& s, const std::string& what) {
+  int n = 0;
+  for (std::size_t p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
+  return n;
+}
+
+io::Trajectory random_trajectory(std::mt19937& rng, int n, bool timestamps) {
+  io::Trajectory t;
+  double time = 1305031102.175304;
+  for (int i = 0; i < n; ++i) {
+    io::TrajectoryPose p;
+    p.frame = 3 * i + 7;
+    if (timestamps) p.timestamp = (time += 0.0333);
+    p.T_cw = random_pose(rng, 1000.0);
+    t.poses.push_back(p);
+  }
+  return t;
+}
+
+}  // namespace
+
+TEST_CASE("KITTI trajectories round trip, with and without frame index", "[io][trajectory]") {
+  TempDir dir;
+  std::mt19937 rng(42);
+  const io::Trajectory t = random_trajectory(rng, 50, false);
+  for (const bool with_index : {false, true}) {
+    const std::string path = dir.file(with_index ? "k13.txt" : "k12.txt");
+    io::write_trajectory_kitti(path, t, "test frame", with_index);
+    const std::string text = read_text(path);
+    CHECK(text.rfind("# " + kVersionTag + " KITTI trajectory: camera-to-world", 0) == 0);
+    CHECK(text.find("test frame") != std::string::npos);
+    CHECK(text.find("metres") != std::string::npos);
+    for (const io::TrajectoryFormat f :
+         {io::TrajectoryFormat::kAuto, io::TrajectoryFormat::kKitti}) {
+      const io::Trajectory r = io::read_trajectory(path, f);
+      CHECK(r.format == io::TrajectoryFormat::kKitti);
+      CHECK(r.has_frame_index == with_index);
+      CHECK_FALSE(r.has_timestamps);
+      REQUIRE(r.poses.size() == t.poses.size());
+      for (std::size_t i = 0; i < t.poses.size(); ++i) {
+        INFO("pose " << i);
+        CHECK(pose_distance(r.poses[i].T_cw, t.poses[i].T_cw) < 1e-9);
+        CHECK(r.poses[i].frame == (with_index ? t.poses[i].frame : static_cast<int>(i)));
+        CHECK(r.poses[i].line == static_cast<int>(i) + 2);  // after the header line
+        CHECK(std::isnan(r.poses[i].timestamp));
+      }
+    }
+  }
+}
+
+TEST_CASE("KITTI lines are camera-to-world and become T_cw", "[io][trajectory]") {
+  TempDir dir;
+  const std::string path = dir.file("kitti.txt");
+  // Camera 0 at the origin; camera 1 at (1, 2, 3) rotated 90° about y (optical axis -> +x).
+  write_text(path,
+             "1 0 0 0 0 1 0 0 0 0 1 0\n"
+             "\n"
+             "0 0 1 1 0 1 0 2 -1 0 0 3\n");
+  const io::Trajectory t = io::read_trajectory(path);
+  REQUIRE(t.poses.size() == 2);
+  CHECK(t.poses[1].line == 3);
+  const lie::SE3d T_wc = t.poses[1].T_cw.inverse();
+  CHECK((T_wc.translation() - Eigen::Vector3d(1, 2, 3)).norm() < 1e-15);
+  // T_cw maps the camera centre to the camera origin.
+  CHECK(t.poses[1].T_cw.act(Eigen::Vector3d(1, 2, 3)).norm() < 1e-15);
+  // The camera's optical axis (0,0,1) in the world is +x.
+  CHECK((T_wc.rotation().act(Eigen::Vector3d::UnitZ()) - Eigen::Vector3d::UnitX()).norm() < 1e-15);
+}
+
+TEST_CASE("TUM trajectories round trip and use qx qy qz qw order", "[io][trajectory]") {
+  TempDir dir;
+  std::mt19937 rng(42);
+  const io::Trajectory t = random_trajectory(rng, 40, true);
+  const std::string path = dir.file("tum.txt");
+  io::write_trajectory_tum(path, t, "W test");
+  CHECK(read_text(path).rfind("# " + kVersionTag + " TUM trajectory", 0) == 0);
+  for (const io::TrajectoryFormat f : {io::TrajectoryFormat::kAuto, io::TrajectoryFormat::kTum}) {
+    const io::Trajectory r = io::read_trajectory(path, f);
+    CHECK(r.format == io::TrajectoryFormat::kTum);
+    CHECK(r.has_timestamps);
+    REQUIRE(r.poses.size() == t.poses.size());
+    for (std::size_t i = 0; i < t.poses.size(); ++i) {
+      INFO("pose " << i);
+      CHECK(pose_distance(r.poses[i].T_cw, t.poses[i].T_cw) < 1e-9);
+      CHECK(r.poses[i].timestamp == t.poses[i].timestamp);  // 17 digits: exact
+      CHECK(r.poses[i].frame == static_cast<int>(i));
+    }
+  }
+
+  // Known answer: 90° about z is (qx qy qz qw) = (0 0 sin45 cos45).
+  const std::string known = dir.file("known_tum.txt");
+  const double s = std::sqrt(0.5);
+  write_text(known,
+             "# comment\n0.5 1 2 3 0 0 " + std::to_string(s) + " " + std::to_string(s) + "\n");
+  const io::Trajectory k = io::read_trajectory(known);
+  const Eigen::Matrix3d R_wc = k.poses[0].T_cw.inverse().rotation().matrix();
+  CHECK((R_wc * Eigen::Vector3d::UnitX() - Eigen::Vector3d::UnitY()).norm() < 1e-6);
+  CHECK(k.poses[0].timestamp == 0.5);
+  CHECK(k.poses[0].line == 2);
+
+  // Without timestamps (KITTI source) the frame indices are written as timestamps.
+  const io::Trajectory no_time = random_trajectory(rng, 5, false);
+  const std::string p2 = dir.file("tum_from_kitti.txt");
+  io::write_trajectory_tum(p2, no_time, "W");
+  CHECK(read_text(p2).find("timestamps are frame indices") != std::string::npos);
+  const io::Trajectory r2 = io::read_trajectory(p2);
+  for (std::size_t i = 0; i < no_time.poses.size(); ++i)
+    CHECK(r2.poses[i].timestamp == no_time.poses[i].frame);
+}
+
+TEST_CASE("Trajectory formats parse from their --format names", "[io][trajectory]") {
+  CHECK(io::parse_trajectory_format("kitti") == io::TrajectoryFormat::kKitti);
+  CHECK(io::parse_trajectory_format("tum") == io::TrajectoryFormat::kTum);
+  CHECK(io::parse_trajectory_format("auto") == io::TrajectoryFormat::kAuto);
+  CHECK_THROWS_AS(io::parse_trajectory_format("euroc"), geodrift::InvalidArgument);
+}
+
+TEST_CASE("Anchors CSV round trips and every position form lands on the same W point",
+          "[io][anchors]") {
+  TempDir dir;
+  const geo::LocalFrame frame = geo::kitti_local_frame();
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> u(-3000.0, 3000.0);
+  std::vector<io::Anchor> anchors;
+  for (int i = 0; i < 20; ++i) {
+    io::Anchor a;
+    a.frame = 50 * (i + 1);
+    a.timestamp = 0.1 * a.frame;
+    a.y_w = Eigen::Vector3d(u(rng), u(rng), 0.01 * u(rng));
+    a.sigma_m = i % 3 == 0 ? std::nan("") : 0.05 * (i + 1);
+    a.heading = i % 4 == 0 ? std::nan("") : 0.3 * i;
+    anchors.push_back(a);
+  }
+  const std::string path = dir.file("anchors.csv");
+  io::write_anchors_csv(path, anchors, frame);
+  CHECK(read_text(path).rfind("# " + kVersionTag + " anchors", 0) == 0);
+  const io::AnchorTable table = io::read_anchors_csv(path);
+  CHECK(table.kind == io::AnchorPositionKind::kGeodetic);
+  CHECK(table.has_frame);
+  CHECK(table.has_timestamp);
+  const std::vector<io::Anchor> back = io::anchors_in_world(table, frame);
+  REQUIRE(back.size() == anchors.size());
+  for (std::size_t i = 0; i < anchors.size(); ++i) {
+    INFO("anchor " << i);
+    CHECK((back[i].y_w - anchors[i].y_w).norm() < 1e-6);
+    CHECK(back[i].frame == anchors[i].frame);
+    CHECK(back[i].timestamp == anchors[i].timestamp);
+    CHECK(back[i].line == static_cast<int>(i) + 3);
+    CHECK(std::isnan(back[i].sigma_m) == std::isnan(anchors[i].sigma_m));
+    if (!std::isnan(anchors[i].sigma_m)) CHECK(back[i].sigma_m == Approx(anchors[i].sigma_m));
+    CHECK(std::isnan(back[i].heading) == std::isnan(anchors[i].heading));
+    if (!std::isnan(anchors[i].heading))
+      CHECK(back[i].heading == Approx(anchors[i].heading).margin(1e-12));
+  }
+
+  // The same first anchor written as UTM (its own standard zone: 32N here), UTM of the
+  // neighbouring zone 33N, and W x,y,z.
+  const geo::Geodetic g = frame.to_geodetic(anchors[0].y_w);
+  const geo::UtmCoordinate u32 = geo::geodetic_to_utm(g);
+  const geo::UtmCoordinate u33 = geo::geodetic_to_utm(g, 33);
+  const std::string utm_path = dir.file("utm.csv");
+  write_text(utm_path, "timestamp, easting, northing, zone, height, heading_deg\n" +
+                           io::detail::fmt(5.0) + "," + io::detail::fmt(u32.easting) + "," +
+                           io::detail::fmt(u32.northing) + ",32N," + io::detail::fmt(g.height) +
+                           ",90\n" + "6," + io::detail::fmt(u33.easting) + "," +
+                           io::detail::fmt(u33.northing) + ",33n," + io::detail::fmt(g.height) +
+                           ",\n");
+  const io::AnchorTable ut = io::read_anchors_csv(utm_path);
+  CHECK(ut.kind == io::AnchorPositionKind::kUtm);
+  CHECK_FALSE(ut.has_frame);
+  const std::vector<io::Anchor> ua = io::anchors_in_world(ut, frame);
+  CHECK((ua[0].y_w - anchors[0].y_w).norm() < 1e-3);
+  CHECK((ua[1].y_w - anchors[0].y_w).norm() < 1e-3);
+  CHECK(ua[0].frame == -1);
+  CHECK(ua[0].heading == Approx(kPi / 2));
+  CHECK(std::isnan(ua[1].heading));
+  // A frame at the first anchor has it at W's origin.
+  const geo::LocalFrame f0 = io::local_frame_at_first_anchor(ut);
+  CHECK(f0.zone_string() == "32N");
+  CHECK(io::anchors_in_world(ut, f0)[0].y_w.norm() < 1e-9);
+
+  const std::string xyz_path = dir.file("xyz.csv");
+  write_text(xyz_path, "# W anchors\nframe,x,y,z,sigma_m\n10,1.5,-2.5,3,0.2\n");
+  const std::vector<io::Anchor> xa = io::read_anchors(xyz_path, frame);
+  REQUIRE(xa.size() == 1);
+  CHECK(xa[0].y_w == Eigen::Vector3d(1.5, -2.5, 3.0));
+  CHECK(xa[0].frame == 10);
+  CHECK(xa[0].sigma_m == 0.2);
+  CHECK(xa[0].line == 3);
+  CHECK_THROWS_AS(io::local_frame_at_first_anchor(io::read_anchors_csv(xyz_path)),
+                  geodrift::InvalidArgument);
+}
+
+TEST_CASE("COLMAP text models round trip through map::Map", "[io][colmap]") {
+  TempDir dir;
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> px(0.0, 1200.0);
+  geodrift::map::Map m;
+  m.cameras.push_back({1, 718.856, 718.856, 607.1928, 185.2157, 1241, 376});
+  m.cameras.push_back({7, 500.0, 510.0, 320.5, 240.25, 640, 480});
+  for (int i = 0; i < 6; ++i) {
+    geodrift::map::Keyframe k;
+    k.id = 100 + i;
+    k.frame_index = 3 * i;
+    k.T_cw = random_pose(rng, 50.0);
+    k.camera_id = i % 2 ? 7 : 1;
+    m.keyframes.push_back(k);
+  }
+  for (int j = 0; j < 30; ++j) {
+    geodrift::map::MapPoint p;
+    p.id = 1000 + j;
+    p.position = random_pose(rng, 20.0).translation();
+    // Seen by keyframes j%6 .. j%6+2 (clipped): reference = the earliest.
+    const int first = j % 4;
+    p.reference_keyframe = 100 + first;
+    m.points.push_back(p);
+    for (int k = first; k < first + 3; ++k)
+      m.observations.push_back({100 + k, 1000 + j, Eigen::Vector2d(px(rng), px(rng) * 0.3)});
+  }
+  io::write_colmap_text(dir.path().string(), m, "M (test)");
+  for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
+    CHECK(read_text(dir.file(f)).rfind("# " + kVersionTag + " COLMAP text model", 0) == 0);
+  const io::ColmapModel r = io::read_colmap_text(dir.path().string());
+  REQUIRE(r.map.cameras.size() == 2);
+  CHECK(r.map.cameras[1].id == 7);
+  CHECK(r.map.cameras[1].fy == 510.0);
+  CHECK(r.map.cameras[1].cy == 240.25);
+  CHECK(r.map.cameras[0].width == 1241);
+  REQUIRE(r.map.keyframes.size() == m.keyframes.size());
+  for (std::size_t i = 0; i < m.keyframes.size(); ++i) {
+    INFO("keyframe " << i);
+    CHECK(r.map.keyframes[i].id == m.keyframes[i].id);
+    CHECK(r.map.keyframes[i].frame_index == m.keyframes[i].frame_index);  // from "%06d.png"
+    CHECK(r.map.keyframes[i].camera_id == m.keyframes[i].camera_id);
+    CHECK(pose_distance(r.map.keyframes[i].T_cw, m.keyframes[i].T_cw) < 1e-12);
+  }
+  REQUIRE(r.map.points.size() == m.points.size());
+  for (std::size_t j = 0; j < m.points.size(); ++j) {
+    CHECK(r.map.points[j].id == m.points[j].id);
+    CHECK(r.map.points[j].position == m.points[j].position);
+    CHECK(r.map.points[j].reference_keyframe == m.points[j].reference_keyframe);
+  }
+  REQUIRE(r.map.observations.size() == m.observations.size());
+  std::set<std::tuple<int, int, double, double>> a, b;
+  for (const auto& o : m.observations) a.insert({o.keyframe, o.point, o.pixel.x(), o.pixel.y()});
+  for (const auto& o : r.map.observations)
+    b.insert({o.keyframe, o.point, o.pixel.x(), o.pixel.y()});
+  CHECK(a == b);
+  CHECK_NOTHROW(r.map.validate());
+}
+
+TEST_CASE("COLMAP reader takes distortion-free OPENCV/SIMPLE_PINHOLE cameras and names",
+          "[io][colmap]") {
+  TempDir dir;
+  write_text(dir.file("cameras.txt"),
+             "# Camera list\n1 SIMPLE_PINHOLE 640 480 500 320 240\n"
+             "2 OPENCV 640 480 500 501 320 240 0 0 0 0\n");
+  // Image 5 has no points (empty POINTS2D line); TUM-style names give timestamps.
+  write_text(dir.file("images.txt"),
+             "# Image list\n"
+             "5 1 0 0 0 0 0 0 1 rgb/1305031102.275304.png\n"
+             "\n"
+             "3 1 0 0 0 1 2 3 2 rgb/1305031102.175304.png\n"
+             "10 20 42 30.5 40.5 -1\n");
+  write_text(dir.file("points3D.txt"), "42 1 2 3 255 0 10 0.5 3 0\n");
+  const io::ColmapModel r = io::read_colmap_text(dir.path().string());
+  REQUIRE(r.map.cameras.size() == 2);
+  CHECK(r.map.cameras[0].fx == 500.0);
+  CHECK(r.map.cameras[0].fy == 500.0);
+  CHECK(r.map.cameras[0].cx == 320.0);
+  CHECK(r.map.cameras[1].fy == 501.0);
+  REQUIRE(r.map.keyframes.size() == 2);
+  // Sorted by time: image 3 first.
+  CHECK(r.map.keyframes[0].id == 3);
+  CHECK(r.map.keyframes[0].timestamp == Approx(1305031102.175304));
+  CHECK(r.map.keyframes[0].frame_index == 0);
+  CHECK(r.map.keyframes[1].frame_index == 1);
+  CHECK(r.image_names[0] == "rgb/1305031102.175304.png");
+  CHECK((r.map.keyframes[0].T_cw.translation() - Eigen::Vector3d(1, 2, 3)).norm() == 0.0);
+  REQUIRE(r.map.observations.size() == 1);
+  CHECK(r.map.observations[0].keyframe == 3);
+  CHECK(r.map.observations[0].pixel == Eigen::Vector2d(10, 20));
+  CHECK(r.map.points[0].reference_keyframe == 3);
+  CHECK(r.point_colors[0][0] == 255);
+  CHECK(r.point_colors[0][2] == 10);
+  CHECK(r.point_errors[0] == 0.5);
+
+  long long frame = 0;
+  double t = 0;
+  io::detail::frame_from_image_name("seq/frame_000123.png", &frame, &t);
+  CHECK(frame == 123);
+  CHECK(std::isnan(t));
+  io::detail::frame_from_image_name("cam.jpg", &frame, &t);
+  CHECK(frame == -1);
+}
+
+TEST_CASE("trajectory.csv round trips with UTM, latitude/longitude and heading", "[io][csv]") {
+  TempDir dir;
+  const geo::LocalFrame frame = geo::kitti_local_frame();
+  std::vector<io::TrajectoryCsvRow> rows;
+  for (int i = 0; i < 30; ++i) {
+    io::TrajectoryCsvRow r;
+    r.frame = i;
+    r.timestamp = i % 5 == 4 ? std::nan("") : 0.1 * i;
+    r.keyframe = i % 3 == 0;
+    r.after_last_anchor = i > 25;
+    const Eigen::Vector3d c(10.0 * i, 50.0 * i - 400.0, 0.5 * i);
+    const double heading = 0.2 * i;  // true heading of a level camera
+    const Eigen::Matrix3d R_wc = frame.level_camera_rotation_from_heading(heading, c);
+    r.T_cw = lie::SE3d(lie::SO3d(Eigen::Matrix3d(R_wc)), c).inverse();
+    rows.push_back(r);
+  }
+  const std::string path = dir.file("trajectory.csv");
+  io::write_trajectory_csv(path, rows, frame, geo::kKittiGeoOriginNote);
+  const std::string text = read_text(path);
+  CHECK(text.rfind("# " + kVersionTag + " trajectory: x,y,z camera centre in W = UTM 32N", 0) == 0);
+  CHECK(text.find("ASSUMPTION") != std::string::npos);
+  const std::vector<io::TrajectoryCsvRecord> back = io::read_trajectory_csv(path);
+  REQUIRE(back.size() == rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    INFO("row " << i);
+    const Eigen::Vector3d c = rows[i].T_cw.inverse().translation();
+    CHECK((back[i].p_w - c).norm() < 1e-5);
+    const geo::UtmCoordinate u = frame.utm_of(c);
+    CHECK(back[i].easting == Approx(u.easting).margin(1e-5));
+    CHECK(back[i].northing == Approx(u.northing).margin(1e-5));
+    CHECK(back[i].zone == "32N");
+    const geo::Geodetic g = frame.to_geodetic(c);
+    CHECK(back[i].latitude_deg == Approx(g.latitude_deg).margin(1e-9));
+    CHECK(back[i].longitude_deg == Approx(g.longitude_deg).margin(1e-9));
+    CHECK(back[i].height == Approx(160.0 + c.z()).margin(1e-5));
+    CHECK(back[i].heading_deg == Approx(0.2 * static_cast<double>(i) * 180.0 / kPi).margin(1e-5));
+    CHECK(back[i].keyframe == rows[i].keyframe);
+    CHECK(back[i].after_last_anchor == rows[i].after_last_anchor);
+    CHECK(std::isnan(back[i].timestamp) == std::isnan(rows[i].timestamp));
+    CHECK(back[i].line == static_cast<int>(i) + 3);
+  }
+}
+
+TEST_CASE("GeoJSON and KML carry lon,lat order, the anchors and the metadata",
+          "[io][geojson][kml]") {
+  TempDir dir;
+  const geo::LocalFrame frame = geo::kitti_local_frame();
+  std::vector<Eigen::Vector3d> track;
+  for (int i = 0; i < 25; ++i) track.emplace_back(3.0 * i, 40.0 * i, 0.1 * i);
+  std::vector<io::Anchor> anchors(2);
+  anchors[0].frame = 5, anchors[0].y_w = track[5], anchors[0].sigma_m = 0.05;
+  anchors[1].timestamp = 2.5, anchors[1].y_w = track[20];
+
+  const std::string gj = dir.file("track.geojson");
+  io::write_geojson(gj, track, anchors, frame, geo::kKittiGeoOriginNote);
+  const std::string j = read_text(gj);
+  CHECK(j.find("\"type\": \"FeatureCollection\"") != std::string::npos);
+  CHECK(j.find("\"version\": \"" + std::string(geodrift::kVersion) + "\"") != std::string::npos);
+  CHECK(j.find("ASSUMPTION") != std::string::npos);
+  CHECK(count_of(j, "\"LineString\"") == 1);
+  CHECK(count_of(j, "\"Point\"") == 2);
+  CHECK(count_of(j, "{") == count_of(j, "}"));
+  CHECK(count_of(j, "[") == count_of(j, "]"));
+  // The LineString coordinates: [lon, lat, h] triples equal to the W track's geodetic positions.
+  const std::size_t b = j.find("\"coordinates\": [", j.find("LineString"));
+  const std::size_t e = j.find("]}}", b);
+  const std::vector<double> nums = numbers_in(j.substr(b, e - b));
+  REQUIRE(nums.size() == 3 * track.size());
+  for (std::size_t i = 0; i < track.size(); ++i) {
+    const geo::Geodetic g = frame.to_geodetic(track[i]);
+    CHECK(nums[3 * i] == Approx(g.longitude_deg).margin(1e-9));
+    CHECK(nums[3 * i + 1] == Approx(g.latitude_deg).margin(1e-9));
+    CHECK(nums[3 * i + 2] == Approx(g.height).margin(1e-4));
+  }
+  // Karlsruhe: longitude ~8.4 comes first, latitude ~49.0 second.
+  CHECK(nums[0] == Approx(8.417).margin(1e-6));
+  CHECK(nums[1] == Approx(49.011).margin(1e-6));
+
+  const std::string km = dir.file("track.kml");
+  io::write_kml(km, track, anchors, frame, geo::kKittiGeoOriginNote);
+  const std::string k = read_text(km);
+  CHECK(k.find("<kml xmlns=\"http://www.opengis.net/kml/2.2\">") != std::string::npos);
+  CHECK(k.find(kVersionTag) != std::string::npos);
+  CHECK(count_of(k, "<Placemark>") == 3);
+  CHECK(count_of(k, "<Placemark>") == count_of(k, "</Placemark>"));
+  const std::size_t kb = k.find("<coordinates>") + 13;
+  const std::vector<double> kn = numbers_in(k.substr(kb, k.find("</coordinates>") - kb));
+  REQUIRE(kn.size() == 3 * track.size());
+  for (std::size_t i = 0; i < track.size(); ++i) {
+    const geo::Geodetic g = frame.to_geodetic(track[i]);
+    CHECK(kn[3 * i] == Approx(g.longitude_deg).margin(1e-9));
+    CHECK(kn[3 * i + 1] == Approx(g.latitude_deg).margin(1e-9));
+  }
+}
+
+TEST_CASE("PLY point clouds round trip with and without colour", "[io][ply]") {
+  TempDir dir;
+  std::mt19937 rng(42);
+  io::PointCloud cloud;
+  for (int i = 0; i < 100; ++i) cloud.points.push_back(random_pose(rng, 5000.0).translation());
+  for (const bool rgb : {false, true}) {
+    if (rgb)
+      for (int i = 0; i < 100; ++i)
+        cloud.colors.push_back(
+            {static_cast<std::uint8_t>(i), 7, static_cast<std::uint8_t>(255 - i)});
+    const std::string path = dir.file(rgb ? "rgb.ply" : "xyz.ply");
+    io::write_ply(path, cloud, "W = UTM 32N shifted");
+    const io::PointCloud r = io::read_ply(path);
+    REQUIRE(r.points.size() == cloud.points.size());
+    for (std::size_t i = 0; i < cloud.points.size(); ++i) CHECK(r.points[i] == cloud.points[i]);
+    CHECK(r.colors == cloud.colors);
+    REQUIRE(r.comments.size() == 3);
+    CHECK(r.comments[0] == kVersionTag + " map points");
+    CHECK(r.comments[1] == "frame: W = UTM 32N shifted");
+    CHECK(r.comments[2] == "units: metres");
+  }
+}
+
+TEST_CASE("SVG plots keep equal aspect, north up, and state version and frame", "[io][svg]") {
+  TempDir dir;
+  io::SvgSeries square{"square", "#123456", 2.0, {{0, 0}, {100, 0}, {100, 100}, {0, 100}}};
+  io::SvgSeries wide{"wide", "red", 1.0, {{-50, 20}, {250, 20}}};
+  const std::vector<io::SvgMarker> markers = {{"a0", {0, 0}}, {"a1", {100, 100}}};
+  const std::string path = dir.file("topview.svg");
+  io::write_svg_topview(path, {square, wide}, markers, "Top view", "W = UTM 32N");
+  const std::string s = read_text(path);
+  CHECK(s.find("<svg xmlns=\"http://www.w3.org/2000/svg\"") != std::string::npos);
+  CHECK(s.find(kVersionTag + "; frame: W = UTM 32N; axes: x east, y north, metres") !=
+        std::string::npos);
+  CHECK(count_of(s, "<polyline") == 2);
+  CHECK(count_of(s, "<circle") == 3);  // two markers + the legend entry
+  // The square's pixel coordinates: equal sides (equal aspect) and y flipped (north up).
+  const std::size_t b = s.find("points=\"", s.find("data-label=\"square\"")) + 8;
+  const std::vector<double> p = numbers_in(s.substr(b, s.find('"', b) - b));
+  REQUIRE(p.size() == 8);
+  const double side_x = p[2] - p[0], side_y = p[3] - p[5];
+  CHECK(side_x > 100.0);
+  CHECK(side_y == Approx(side_x).epsilon(1e-6));  // (100, 100) is ABOVE (100, 0) on screen
+
+  const std::string sp = dir.file("scale.svg");
+  io::SvgSeries scale{"scale factor", "blue", 1.5, {{0, 0.9}, {100, 1.1}, {200, 1.0}}};
+  io::write_svg_line_plot(sp, {scale}, "Scale factor", "distance [m]", "scale", "W", 1.0);
+  const std::string t = read_text(sp);
+  CHECK(count_of(t, "<polyline") == 1);
+  CHECK(count_of(t, "stroke-dasharray=\"4 4\"") == 1);  // the reference line
+  CHECK(t.find(kVersionTag) != std::string::npos);
+  CHECK(io::detail::nice_step(97.0) == 20.0);
+  CHECK(io::detail::nice_step(0.3) == 0.05);
+}
+
+TEST_CASE("Writers replace files atomically and never leave partial files", "[io][atomic]") {
+  TempDir dir;
+  const std::string path = dir.file("out.txt");
+  write_text(path, "old content\n");
+  // A writer that fails half way leaves the old file and no temporary file.
+  CHECK_THROWS_AS(io::detail::write_atomically(path,
+                                               [](std::ostream& os) {
+                                                 os << "partial";
+                                                 throw geodrift::InvalidArgument("boom");
+                                               }),
+                  geodrift::InvalidArgument);
+  CHECK(read_text(path) == "old content\n");
+  CHECK(dir.num_entries() == 1);
+  // A writer whose input is bad throws before touching the target.
+  std::vector<io::TrajectoryCsvRow> rows(2);
+  rows[1].T_cw = lie::SE3d(lie::SO3d(), Eigen::Vector3d(-2.0e6, 0.0, 0.0));  // centre 2000 km east
+  CHECK_THROWS_AS(io::write_trajectory_csv(path, rows, geo::kitti_local_frame()),
+                  geodrift::InvalidArgument);
+  CHECK(read_text(path) == "old content\n");
+  CHECK(dir.num_entries() == 1);
+  // Success replaces the content.
+  io::detail::write_atomically(path, [](std::ostream& os) { os << "new\n"; });
+  CHECK(read_text(path) == "new\n");
+  CHECK(dir.num_entries() == 1);
+  // A missing directory is an I/O Error naming the path.
+  const std::string bad = dir.file("no/such/dir/out.txt");
+  geodrift::test::require_io_error(
+      [&] { io::detail::write_atomically(bad, [](std::ostream& os) { os << "x"; }); }, bad);
+}
