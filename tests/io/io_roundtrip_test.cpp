@@ -521,3 +521,78 @@ TEST_CASE("Writers replace files atomically and never leave partial files", "[io
   geodrift::test::require_io_error(
       [&] { io::detail::write_atomically(bad, [](std::ostream& os) { os << "x"; }); }, bad);
 }
+
+TEST_CASE("KITTI files with a leading time column read as timestamps", "[io][trajectory]") {
+  TempDir dir;
+  const std::string p = dir.file("with_times.txt");
+  write_text(p, "0 1 0 0 0 0 1 0 0 0 0 1 0\n0.1036117 1 0 0 0 0 1 0 0 0 0 1 1.5\n");
+  const io::Trajectory t = io::read_trajectory(p);
+  CHECK(t.format == io::TrajectoryFormat::kKitti);
+  CHECK(t.has_timestamps);
+  CHECK_FALSE(t.has_frame_index);
+  REQUIRE(t.poses.size() == 2);
+  CHECK(t.poses[1].timestamp == 0.1036117);
+  CHECK(t.poses[1].frame == 1);
+  CHECK(t.poses[1].T_cw.inverse().translation().z() == 1.5);
+}
+
+TEST_CASE("Anchors are located on the trajectory by frame or by time", "[io][anchors]") {
+  io::Trajectory traj;
+  traj.has_timestamps = true;
+  for (int i = 0; i < 5; ++i) {
+    io::TrajectoryPose p;
+    p.frame = 10 * i;
+    p.timestamp = 100.0 + 2.0 * i;
+    traj.poses.push_back(p);
+  }
+  std::vector<io::Anchor> a(4);
+  a[0].frame = 0;
+  a[1].frame = 25;
+  a[2].timestamp = 107.0;
+  a[3].frame = 40;
+  const std::vector<io::AnchorLocation> loc = io::locate_anchors(a, traj, "anchors.csv");
+  CHECK(loc[0].index == 0);
+  CHECK(loc[0].fraction == 0.0);
+  CHECK(loc[1].index == 2);
+  CHECK(loc[1].fraction == Approx(0.5));
+  CHECK(loc[2].index == 3);
+  CHECK(loc[2].fraction == Approx(0.5));
+  CHECK(loc[3].index == 4);
+  CHECK(loc[3].fraction == 0.0);
+
+  std::vector<io::Anchor> late(1);
+  late[0].frame = 41;
+  late[0].line = 7;
+  geodrift::test::require_parse_error([&] { io::locate_anchors(late, traj, "anchors.csv"); },
+                                      "anchors.csv", 7, "frame 41 is outside");
+  std::vector<io::Anchor> early(1);
+  early[0].timestamp = 99.0;
+  early[0].line = 3;
+  geodrift::test::require_parse_error([&] { io::locate_anchors(early, traj, "anchors.csv"); },
+                                      "anchors.csv", 3, "timestamp 99 is outside");
+  traj.has_timestamps = false;
+  geodrift::test::require_parse_error([&] { io::locate_anchors(early, traj, "anchors.csv"); },
+                                      "anchors.csv", 3, "no timestamps");
+}
+
+TEST_CASE("The shipped KITTI ground truth reads as 4661 poses, with and without times",
+          "[io][trajectory][data]") {
+  const std::string dir = std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt";
+  const io::Trajectory plain = io::read_trajectory(dir + "/poses/02.txt");
+  const io::Trajectory timed = io::read_trajectory(dir + "/egusa_poses_with_times/02.txt");
+  REQUIRE(plain.poses.size() == 4661);
+  REQUIRE(timed.poses.size() == 4661);
+  CHECK(timed.has_timestamps);
+  CHECK(timed.poses.back().timestamp == Approx(483.28).margin(0.01));
+  double length = 0.0, max_diff = 0.0;
+  for (std::size_t i = 0; i < plain.poses.size(); ++i) {
+    max_diff = std::max(max_diff, pose_distance(plain.poses[i].T_cw, timed.poses[i].T_cw));
+    if (i > 0)
+      length += (plain.poses[i].T_cw.inverse().translation() -
+                 plain.poses[i - 1].T_cw.inverse().translation())
+                    .norm();
+  }
+  CHECK(max_diff < 1e-5);                       // same poses, printed with different digits
+  CHECK(length == Approx(5067.2).margin(0.1));  // the README's path length
+  CHECK(pose_distance(plain.poses[0].T_cw, lie::SE3d()) < 1e-6);
+}

@@ -24,10 +24,13 @@
 /// position outside W's UTM zone; Error for a missing file.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <ostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -35,6 +38,7 @@
 #include "geodrift/geo/local_frame.hpp"
 #include "geodrift/geo/utm.hpp"
 #include "geodrift/io/detail/text_io.hpp"
+#include "geodrift/io/trajectory.hpp"
 #include "geodrift/version.hpp"
 
 namespace geodrift::io {
@@ -281,6 +285,65 @@ inline std::vector<Anchor> anchors_in_world(const AnchorTable& table,
 /// Reads an anchors CSV and converts it to W in one call.
 inline std::vector<Anchor> read_anchors(const std::string& path, const geo::LocalFrame& frame) {
   return anchors_in_world(read_anchors_csv(path), frame);
+}
+
+/// Where an anchor falls on a trajectory: at pose `index` + `fraction` of the way to pose
+/// `index + 1` (fraction in [0, 1); the last pose is index n-1 with fraction 0).
+struct AnchorLocation {
+  std::size_t index = 0;
+  double fraction = 0.0;
+};
+
+/// Locates each anchor on a trajectory (DESIGN.md: "an anchor between frames is interpolated in
+/// time; one outside the trajectory's time range is an error"). An anchor with a frame is placed
+/// by TrajectoryPose::frame (the KITTI leading index, or the 0-based pose order); one with only a
+/// timestamp by TrajectoryPose::timestamp (linear in time between the two neighbouring poses).
+/// @param anchors_path the anchors file, for messages.
+/// @throws InvalidArgument "<anchors_path>:<line>: <what>" for an anchor outside the
+///         trajectory's frame or time range, or with only a timestamp when the trajectory has
+///         none.
+inline std::vector<AnchorLocation> locate_anchors(const std::vector<Anchor>& anchors,
+                                                  const Trajectory& traj,
+                                                  const std::string& anchors_path) {
+  GEODRIFT_CHECK(!traj.poses.empty(), "locate_anchors: empty trajectory");
+  std::vector<double> frames, times;
+  for (const TrajectoryPose& p : traj.poses) {
+    frames.push_back(p.frame);
+    times.push_back(p.timestamp);
+  }
+  const auto locate = [&](const std::vector<double>& keys, double v, const Anchor& a,
+                          const char* what) {
+    if (!(v >= keys.front() && v <= keys.back())) {
+      std::ostringstream os;
+      os << std::setprecision(15) << "anchor " << what << " " << v
+         << " is outside the trajectory's " << what << " range [" << keys.front() << ", "
+         << keys.back() << "]";
+      detail::parse_error(anchors_path, a.line, os.str());
+    }
+    AnchorLocation loc;
+    const std::size_t hi = static_cast<std::size_t>(std::upper_bound(keys.begin(), keys.end(), v) -
+                                                    keys.begin());  // first key > v
+    if (hi >= keys.size()) {
+      loc.index = keys.size() - 1;  // v == last key
+    } else {
+      loc.index = hi - 1;
+      loc.fraction = (v - keys[loc.index]) / (keys[hi] - keys[loc.index]);
+    }
+    return loc;
+  };
+  std::vector<AnchorLocation> out;
+  for (const Anchor& a : anchors) {
+    if (a.frame >= 0) {
+      out.push_back(locate(frames, a.frame, a, "frame"));
+    } else {
+      if (!traj.has_timestamps)
+        detail::parse_error(anchors_path, a.line,
+                            "anchor has a timestamp but no frame, and the trajectory has no "
+                            "timestamps (KITTI): give a 'frame' column");
+      out.push_back(locate(times, a.timestamp, a, "timestamp"));
+    }
+  }
+  return out;
 }
 
 /// Writes anchors as CSV with columns

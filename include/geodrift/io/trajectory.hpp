@@ -7,7 +7,9 @@
 /// File formats (both store camera -> world poses T_wc; geodrift keeps T_cw = T_wc⁻¹ in memory,
 /// DESIGN.md, and converts here, at the edge):
 ///   KITTI  r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz      (the 3x4 [R | t] row-major)
-///          optionally preceded by an integer frame index (13 fields);
+///          optionally preceded by a 13th leading column: an integer frame index when it is an
+///          integer on every line, else a timestamp in seconds (the "poses with times" variant
+///          that prepends KITTI's times.txt);
 ///   TUM    timestamp tx ty tz qx qy qz qw                    (seconds, metres, unit quaternion)
 /// Blank lines and lines starting with '#' are skipped. Every data line must have the same
 /// number of fields.
@@ -65,7 +67,7 @@ inline TrajectoryFormat parse_trajectory_format(const std::string& s) {
 struct TrajectoryPose {
   /// Frame index: the leading index of a 13-field KITTI line, else the 0-based data-line order.
   int frame = 0;
-  /// Seconds (TUM); NaN when the file has no timestamps (KITTI).
+  /// Seconds (TUM, KITTI with a time column); NaN when the file has no timestamps.
   double timestamp = std::numeric_limits<double>::quiet_NaN();
   /// World -> camera (DESIGN.md), in the file's world frame and units.
   lie::SE3d T_cw;
@@ -77,7 +79,7 @@ struct TrajectoryPose {
 struct Trajectory {
   TrajectoryFormat format = TrajectoryFormat::kAuto;  ///< format the file was read as
   bool has_frame_index = false;  ///< KITTI file carried an explicit leading frame index
-  bool has_timestamps = false;   ///< TUM file (timestamps valid)
+  bool has_timestamps = false;   ///< TUM file, or KITTI with a leading time column
   std::vector<TrajectoryPose> poses;
 };
 
@@ -109,13 +111,25 @@ inline Trajectory read_trajectory(const std::string& path,
   detail::LineReader reader(path);
   Trajectory traj;
   traj.format = format;
-  std::size_t expected_fields = 0;
+  // Pass 1: the data lines (the leading column of a 13-field KITTI file is a frame index only if
+  // it is an integer on every line, which needs the whole file).
+  std::vector<std::pair<int, std::vector<std::string>>> data;
   std::string raw;
   while (reader.next(&raw)) {
     const std::string text = detail::trim(raw);
     if (text.empty() || text[0] == '#') continue;
-    const int line = reader.line();
-    const std::vector<std::string> tok = detail::split_ws(text);
+    data.emplace_back(reader.line(), detail::split_ws(text));
+  }
+  bool leading_is_integer = true;
+  for (const auto& d : data) {
+    if (d.second.size() != 13) continue;
+    const std::string& f = d.second[0];
+    const std::size_t b = (!f.empty() && (f[0] == '-' || f[0] == '+')) ? 1 : 0;
+    leading_is_integer = leading_is_integer && f.size() > b &&
+                         f.find_first_not_of("0123456789", b) == std::string::npos;
+  }
+  std::size_t expected_fields = 0;
+  for (const auto& [line, tok] : data) {
     if (expected_fields == 0) {
       // The first data line fixes the format (auto) and the field count.
       if (traj.format == TrajectoryFormat::kAuto) {
@@ -141,8 +155,10 @@ inline Trajectory read_trajectory(const std::string& path,
                                 " fields, expected 8 (timestamp tx ty tz qx qy qz qw)");
       }
       expected_fields = tok.size();
-      traj.has_frame_index = traj.format == TrajectoryFormat::kKitti && tok.size() == 13;
-      traj.has_timestamps = traj.format == TrajectoryFormat::kTum;
+      const bool kitti13 = traj.format == TrajectoryFormat::kKitti && tok.size() == 13;
+      traj.has_frame_index = kitti13 && leading_is_integer;
+      traj.has_timestamps =
+          traj.format == TrajectoryFormat::kTum || (kitti13 && !leading_is_integer);
     } else if (tok.size() != expected_fields) {
       detail::parse_error(path, line,
                           std::string(to_string(traj.format)) + " line has " +
@@ -160,6 +176,9 @@ inline Trajectory read_trajectory(const std::string& path,
       std::size_t k = 0;
       if (traj.has_frame_index) {
         pose.frame = static_cast<int>(detail::parse_int(tok[0], path, line, "frame index", 0));
+        k = 1;
+      } else if (traj.has_timestamps) {
+        pose.timestamp = detail::parse_double(tok[0], path, line, "timestamp");
         k = 1;
       }
       static const char* kNames[12] = {"r11", "r12", "r13", "tx",  "r21", "r22",
