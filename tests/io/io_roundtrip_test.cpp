@@ -130,7 +130,7 @@ TEST_CASE("TUM trajectories round trip and use qx qy qz qw order", "[io][traject
     for (std::size_t i = 0; i < t.poses.size(); ++i) {
       INFO("pose " << i);
       CHECK(pose_distance(r.poses[i].T_cw, t.poses[i].T_cw) < 1e-9);
-      CHECK(r.poses[i].timestamp == t.poses[i].timestamp);  // 17 digits: exact
+      CHECK(r.poses[i].timestamp == t.poses[i].timestamp);  // shortest round trip: exact
       CHECK(r.poses[i].frame == static_cast<int>(i));
     }
   }
@@ -595,4 +595,18 @@ TEST_CASE("The shipped KITTI ground truth reads as 4661 poses, with and without 
   CHECK(max_diff < 1e-5);                       // same poses, printed with different digits
   CHECK(length == Approx(5067.2).margin(0.1));  // the README's path length
   CHECK(pose_distance(plain.poses[0].T_cw, lie::SE3d()) < 1e-6);
+}
+
+TEST_CASE("Numbers are written in the shortest form that reads back exactly", "[io][format]") {
+  CHECK(io::detail::fmt(0.1) == "0.1");
+  CHECK(io::detail::fmt(-2.5e-7) == "-2.5e-07");
+  CHECK(io::detail::fmt(std::nan("")) == "nan");
+  CHECK(io::detail::fmt(1.0 / 3.0, 4) == "0.3333");
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> u(-1e7, 1e7);
+  for (int i = 0; i < 1000; ++i) {
+    const double v = u(rng) * std::pow(10.0, static_cast<int>(rng() % 21) - 10);
+    INFO(v);
+    CHECK(std::strtod(io::detail::fmt(v).c_str(), nullptr) == v);
+  }
 }

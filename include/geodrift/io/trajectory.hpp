@@ -227,7 +227,7 @@ inline Trajectory read_trajectory(const std::string& path,
 }
 
 /// Writes a KITTI trajectory: one line of 12 numbers per pose (camera -> world [R | t] row-major,
-/// 17 significant digits), optionally preceded by the frame index, after a '#' header line
+/// shortest round-trip digits), optionally preceded by the frame index, after a '#' header line
 /// stating the world frame, units and geodrift version.
 /// @param path             output file, written atomically (temp file + rename).
 /// @param traj             poses (T_cw in W).
@@ -258,7 +258,7 @@ inline void write_trajectory_kitti(const std::string& path, const Trajectory& tr
   });
 }
 
-/// Writes a TUM trajectory "timestamp tx ty tz qx qy qz qw" (camera -> world, 17 significant
+/// Writes a TUM trajectory "timestamp tx ty tz qx qy qz qw" (camera -> world, shortest exact
 /// digits) after a '#' header line stating frame, units and version. When any timestamp is NaN
 /// (a KITTI source), every pose's frame index is written as its timestamp and the header says so.
 /// @throws Error on I/O failure; InvalidArgument if a pose is not finite.

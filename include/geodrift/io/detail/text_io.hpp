@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 #include <atomic>
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -182,9 +183,17 @@ inline void write_atomically(const std::string& path,
   }
 }
 
-/// Formats a double with enough digits to round-trip (max_digits10), "nan" for NaN.
-inline std::string fmt(double v, int precision = 17) {
+/// Formats a double: with precision 0 (default) the SHORTEST text that reads back to exactly
+/// the same double (std::to_chars), e.g. 0.1 -> "0.1"; otherwise with `precision` significant
+/// digits. "nan" for NaN.
+inline std::string fmt(double v, int precision = 0) {
   if (std::isnan(v)) return "nan";
+  if (precision <= 0) {
+    char buf[64];
+    const std::to_chars_result r = std::to_chars(buf, buf + sizeof(buf), v);
+    if (r.ec == std::errc()) return std::string(buf, r.ptr);
+    precision = 17;  // cannot happen with 64 chars; max_digits10 also round-trips
+  }
   std::ostringstream os;
   os << std::setprecision(precision) << v;
   return os.str();
