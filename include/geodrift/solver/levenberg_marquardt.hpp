@@ -1,0 +1,421 @@
+#pragma once
+
+/// @file
+/// LevenbergMarquardt: the damped Gauss-Newton loop over a Problem. It owns the loop and the
+/// linear solver, nothing else.
+///
+/// Each iteration solves (H + λ·D)·δ = −g with H = J̃ᵀJ̃, g = J̃ᵀr̃ (weighted, Triggs-corrected
+/// Jacobian and residual, see residual_block.hpp), then tries x ← x ⊞ δ.
+///
+/// Scaling and damping. Columns are Jacobi-scaled, s_c = 1/(1 + √H_cc) (as Ceres), and the
+/// damping is λ times the scaled diagonal clamped to [min_diagonal, max_diagonal]; written back
+/// in unscaled variables this is D_c = clamp(s_c²·H_cc, min, max)/s_c², which we add to H's
+/// diagonal directly (identical step, no rescaling pass over H).
+///
+/// λ update (gain ratio). ρ = (F(x) − F(x ⊞ δ)) / (L(0) − L(δ)) with the model decrease
+/// L(0) − L(δ) = ½·δᵀ(λ·D·δ − g). A step is accepted only if F decreases (ρ > 0); then
+/// λ ← λ·max(1/3, 1 − (2ρ − 1)³), ν ← 2; otherwise the states are restored and λ ← λ·ν,
+/// ν ← 2ν. Source: H.B. Nielsen, "Damping parameter in Marquardt's method", IMM-REP-1999-05,
+/// and K. Madsen, H.B. Nielsen, O. Tingleff, "Methods for non-linear least squares problems",
+/// 2nd ed., IMM DTU 2004, §3.2 (eq. 3.15 and Algorithm 3.16).
+///
+/// A step that raises the cost is never accepted. A factorisation that is not positive
+/// definite, a non-finite step, or a trial point where a residual cannot be evaluated is a
+/// rejected step (λ grows), never an exception. The loop allocates nothing per iteration (all
+/// buffers are sized before the first iteration; CHOLMOD's internal workspace is its own).
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "geodrift/solver/block_sparse_matrix.hpp"
+#include "geodrift/solver/cholmod_solver.hpp"
+#include "geodrift/solver/dense_solver.hpp"
+#include "geodrift/solver/linear_solver.hpp"
+#include "geodrift/solver/problem.hpp"
+#include "geodrift/solver/schur.hpp"
+
+namespace geodrift::solver {
+
+/// Which linear solver LM uses for the damped normal equations.
+enum class LinearSolverType {
+  kCholmod,     ///< CHOLMOD supernodal Cholesky on the full H (general)
+  kSchur,       ///< eliminate R^3 point blocks, CHOLMOD on the reduced camera system (BA)
+  kDense,       ///< dense LLᵀ of H (tests, tiny problems)
+  kSchurDense,  ///< Schur elimination, dense LLᵀ of the reduced camera system (tiny BA)
+};
+
+/// LM options; every member has a default.
+struct Options {
+  /// Maximum number of LM iterations (each linear solve, accepted or rejected, counts one).
+  int max_iterations = 100;
+  /// Stop after an accepted step when (F_old − F_new) ≤ function_tolerance · F_old.
+  double function_tolerance = 1e-6;
+  /// Stop when max_c |g_c| ≤ gradient_tolerance, g = J̃ᵀr̃ (gradient of the cost).
+  double gradient_tolerance = 1e-10;
+  /// Stop when |δ| ≤ parameter_tolerance · (|x| + parameter_tolerance), |x| in ambient
+  /// coordinates over the free blocks (Problem::state_norm()).
+  double parameter_tolerance = 1e-8;
+  /// Initial damping λ (relative to the scaled diagonal; 1e-4 = Ceres' initial radius 1e4).
+  double initial_lambda = 1e-4;
+  /// Stop (no step can decrease the cost) when λ exceeds this.
+  double max_lambda = 1e32;
+  /// Clamp of the Jacobi-scaled diagonal used for damping (as Ceres' min/max_lm_diagonal).
+  double min_diagonal = 1e-6;
+  double max_diagonal = 1e32;
+  LinearSolverType linear_solver = LinearSolverType::kCholmod;
+  /// Threads for evaluation and assembly: 1 or 2 (2 splits the residual blocks whose H blocks
+  /// fall in disjoint column halves; the rest run on one thread).
+  int num_threads = 1;
+  /// Print one line per iteration to stdout.
+  bool verbose = false;
+
+  /// @return true if the options are usable; otherwise false and *why names the member.
+  bool validate(std::string* why) const {
+    std::ostringstream os;
+    if (max_iterations < 0)
+      os << "max_iterations " << max_iterations << " < 0";
+    else if (!(function_tolerance >= 0.0))
+      os << "function_tolerance " << function_tolerance << " not >= 0";
+    else if (!(gradient_tolerance >= 0.0))
+      os << "gradient_tolerance " << gradient_tolerance << " not >= 0";
+    else if (!(parameter_tolerance >= 0.0))
+      os << "parameter_tolerance " << parameter_tolerance << " not >= 0";
+    else if (!(initial_lambda > 0.0) || !std::isfinite(initial_lambda))
+      os << "initial_lambda " << initial_lambda << " not finite and > 0";
+    else if (!(max_lambda >= initial_lambda))
+      os << "max_lambda " << max_lambda << " < initial_lambda " << initial_lambda;
+    else if (!(min_diagonal > 0.0) || !(max_diagonal >= min_diagonal))
+      os << "diagonal clamp [" << min_diagonal << ", " << max_diagonal << "] is not 0 < min <= max";
+    else if (num_threads != 1 && num_threads != 2)
+      os << "num_threads " << num_threads << " not 1 or 2";
+    const std::string msg = os.str();
+    if (why) *why = msg;
+    return msg.empty();
+  }
+};
+
+/// Why LM stopped.
+enum class Termination {
+  kFunctionTolerance,    ///< converged: relative cost decrease ≤ function_tolerance
+  kGradientTolerance,    ///< converged: max |g| ≤ gradient_tolerance
+  kParameterTolerance,   ///< converged: |δ| ≤ parameter_tolerance·(|x| + parameter_tolerance)
+  kZeroCost,             ///< converged: the cost is exactly 0
+  kMaxIterations,        ///< iteration limit reached (not converged)
+  kNoDecrease,           ///< λ > max_lambda: no step decreases the cost (a local minimum or
+                         ///< a failing residual around x)
+  kLinearSolverFailure,  ///< the linear solver reported a fatal error
+  kNonFiniteResidual,    ///< a residual cannot be evaluated / is NaN at the start
+  kNonFiniteJacobian,    ///< a Jacobian is NaN / inf at an accepted point
+  kInvalidOptions,       ///< Options::validate failed; nothing was done
+  kInvalidProblem,       ///< empty problem or a structure the linear solver cannot handle
+};
+
+inline const char* to_string(Termination t) {
+  switch (t) {
+    case Termination::kFunctionTolerance:
+      return "converged (function tolerance)";
+    case Termination::kGradientTolerance:
+      return "converged (gradient tolerance)";
+    case Termination::kParameterTolerance:
+      return "converged (parameter tolerance)";
+    case Termination::kZeroCost:
+      return "converged (zero cost)";
+    case Termination::kMaxIterations:
+      return "maximum iterations";
+    case Termination::kNoDecrease:
+      return "no decrease (lambda too large)";
+    case Termination::kLinearSolverFailure:
+      return "linear solver failure";
+    case Termination::kNonFiniteResidual:
+      return "non-finite or unevaluable residual";
+    case Termination::kNonFiniteJacobian:
+      return "non-finite Jacobian";
+    case Termination::kInvalidOptions:
+      return "invalid options";
+    case Termination::kInvalidProblem:
+      return "invalid problem";
+  }
+  return "?";
+}
+
+/// What happened in one solve.
+struct Summary {
+  Termination termination = Termination::kInvalidOptions;
+  std::string message;  ///< human-readable reason, names the culprit when one exists
+  int iterations = 0;   ///< linear solves (accepted + rejected)
+  int successful_steps = 0;
+  int unsuccessful_steps = 0;
+  double initial_cost = 0.0;  ///< ½Σρ at the start
+  double final_cost = 0.0;    ///< ½Σρ at the returned states
+  double final_lambda = 0.0;
+  int num_parameters = 0;  ///< free tangent columns
+  int num_residuals = 0;
+  double factor_nnz = 0.0;
+  std::string linear_solver;
+  double time_evaluate = 0.0;   ///< residuals + Jacobians (incl. cost-only trial evaluations) [s]
+  double time_assemble = 0.0;   ///< H += JᵀJ, g += Jᵀr [s]
+  double time_analyze = 0.0;    ///< symbolic analysis (0 when reused) [s]
+  double time_factorize = 0.0;  ///< numeric factorisation (incl. Schur elimination) [s]
+  double time_solve = 0.0;      ///< triangular solves / back-substitution [s]
+  double time_total = 0.0;      ///< whole solve() [s]
+
+  /// Converged by one of the tolerance criteria (or zero cost).
+  bool converged() const {
+    return termination == Termination::kFunctionTolerance ||
+           termination == Termination::kGradientTolerance ||
+           termination == Termination::kParameterTolerance || termination == Termination::kZeroCost;
+  }
+  /// One paragraph: termination, iterations, costs, times.
+  std::string brief_report() const {
+    char buf[512];
+    std::snprintf(buf, sizeof buf,
+                  "LM (%s): %s after %d iterations (%d accepted); cost %.9g -> %.9g; "
+                  "time %.4f s (evaluate %.4f, assemble %.4f, analyze %.4f, factorize %.4f, "
+                  "solve %.4f)",
+                  linear_solver.c_str(), to_string(termination), iterations, successful_steps,
+                  initial_cost, final_cost, time_total, time_evaluate, time_assemble, time_analyze,
+                  time_factorize, time_solve);
+    std::string s(buf);
+    if (!message.empty()) s += ": " + message;
+    return s;
+  }
+};
+
+/// LM over a Problem. Keeps its linear solver (and symbolic analysis) between solve() calls
+/// while the problem's pattern is unchanged.
+class LevenbergMarquardt {
+ public:
+  explicit LevenbergMarquardt(Options options = {}) : options_(options) {}
+  const Options& options() const { return options_; }
+  /// Changing the linear solver type drops the cached analysis.
+  void set_options(const Options& o) {
+    if (o.linear_solver != options_.linear_solver) solver_.reset();
+    options_ = o;
+  }
+
+  /// Minimises the problem's cost from the current states, which hold the result on return
+  /// (the best accepted point). Never throws for numerical outcomes (see Summary::termination).
+  Summary solve(Problem* problem) {
+    using Clock = std::chrono::steady_clock;
+    const auto t_start = Clock::now();
+    Summary sum;
+    const auto finish = [&](Termination t, std::string msg) {
+      sum.termination = t;
+      sum.message = std::move(msg);
+      sum.time_total = std::chrono::duration<double>(Clock::now() - t_start).count();
+      return sum;
+    };
+    std::string why;
+    if (!options_.validate(&why)) return finish(Termination::kInvalidOptions, why);
+
+    const bool schur = options_.linear_solver == LinearSolverType::kSchur ||
+                       options_.linear_solver == LinearSolverType::kSchurDense;
+    if (!problem->is_finalized() || problem->has_schur_ordering() != schur)
+      problem->finalize(schur);
+    const BlockStructure& s = problem->structure();
+    const int n = s.num_cols();
+    sum.num_parameters = n;
+    sum.num_residuals = problem->num_residuals();
+
+    // Linear solver + symbolic analysis (reused while the pattern is the same).
+    if (!solver_) {
+      solver_ = make_solver(options_.linear_solver);
+      analyzed_ = false;
+    }
+    sum.linear_solver = solver_->name();
+    if (!analyzed_ || !s.same_pattern(pattern_)) {
+      const auto t0 = Clock::now();
+      const LinearSolverStatus st = solver_->analyze(s);
+      sum.time_analyze = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (st != LinearSolverStatus::kSuccess) {
+        analyzed_ = false;
+        return finish(Termination::kLinearSolverFailure, solver_->message());
+      }
+      pattern_ = s.pattern();
+      analyzed_ = true;
+    }
+
+    // Buffers (sized once).
+    H_.reset(&s);
+    g_.resize(n);
+    diag_.resize(n);
+    damp_.resize(n);
+    rhs_.resize(n);
+    delta_.resize(n);
+    const std::vector<int>& dpos = s.diagonal_positions();
+
+    LinearizeTimes lt;
+    EvaluationError err;
+    double cost = 0.0;
+    bool ok = problem->linearize(&H_, g_.data(), &cost, &lt, &err);
+    sum.time_evaluate += lt.evaluate;
+    sum.time_assemble += lt.assemble;
+    if (!ok) {
+      sum.initial_cost = sum.final_cost = std::numeric_limits<double>::quiet_NaN();
+      return finish(Termination::kNonFiniteResidual, "at the initial point: " + err.what);
+    }
+    sum.initial_cost = sum.final_cost = cost;
+    if (!g_.allFinite()) {
+      problem->find_non_finite_jacobian(&err);
+      return finish(Termination::kNonFiniteJacobian, "at the initial point: " + err.what);
+    }
+    if (n == 0) return finish(Termination::kGradientTolerance, "no free parameters");
+
+    double lambda = options_.initial_lambda, nu = 2.0;
+    bool relinearized = true;
+    while (true) {
+      if (cost == 0.0) return done(sum, cost, lambda, Termination::kZeroCost, "", finish);
+      if (relinearized) {
+        const double gmax = g_.lpNorm<Eigen::Infinity>();
+        if (gmax <= options_.gradient_tolerance) {
+          return done(sum, cost, lambda, Termination::kGradientTolerance, "max |g| = " + num(gmax),
+                      finish);
+        }
+        double* hv = H_.values();
+        for (int c = 0; c < n; ++c) {
+          const double d = std::max(hv[dpos[c]], 0.0);
+          diag_[c] = hv[dpos[c]];
+          const double sc = 1.0 / (1.0 + std::sqrt(d));
+          damp_[c] =
+              std::clamp(sc * sc * d, options_.min_diagonal, options_.max_diagonal) / (sc * sc);
+        }
+        relinearized = false;
+      }
+      if (sum.iterations >= options_.max_iterations)
+        return done(sum, cost, lambda, Termination::kMaxIterations, "", finish);
+      ++sum.iterations;
+
+      // Damped system.
+      double* hv = H_.values();
+      for (int c = 0; c < n; ++c) hv[dpos[c]] = diag_[c] + lambda * damp_[c];
+      const auto t0 = Clock::now();
+      LinearSolverStatus st = solver_->factorize(H_);
+      const auto t1 = Clock::now();
+      sum.time_factorize += std::chrono::duration<double>(t1 - t0).count();
+      if (st == LinearSolverStatus::kFatal)
+        return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
+                    finish);
+      bool step_ok = st == LinearSolverStatus::kSuccess;
+      if (step_ok) {
+        rhs_ = -g_;
+        st = solver_->solve(rhs_.data(), delta_.data());
+        sum.time_solve += std::chrono::duration<double>(Clock::now() - t1).count();
+        if (st == LinearSolverStatus::kFatal)
+          return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
+                      finish);
+        step_ok = st == LinearSolverStatus::kSuccess && delta_.allFinite();
+      }
+      double new_cost = std::numeric_limits<double>::infinity();
+      double rho = -1.0;
+      if (step_ok) {
+        const double dnorm = delta_.norm();
+        const double xnorm = problem->state_norm();
+        if (dnorm <= options_.parameter_tolerance * (xnorm + options_.parameter_tolerance)) {
+          return done(sum, cost, lambda, Termination::kParameterTolerance,
+                      "|delta| = " + num(dnorm), finish);
+        }
+        // L(0) − L(δ) = ½ δᵀ(λDδ − g)
+        double model = 0.0;
+        for (int c = 0; c < n; ++c) model += delta_[c] * (lambda * damp_[c] * delta_[c] - g_[c]);
+        model *= 0.5;
+        problem->save_state();
+        problem->plus(delta_.data());
+        const auto te = Clock::now();
+        const bool eval_ok = problem->evaluate_cost(&new_cost);
+        sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        if (eval_ok && std::isfinite(new_cost) && new_cost < cost && model > 0.0) {
+          rho = (cost - new_cost) / model;
+        } else {
+          problem->restore_state();
+          rho = -1.0;
+        }
+      }
+      if (options_.verbose) {
+        std::printf("LM it %3d cost %.12g new %.12g rho %.3g lambda %.3g\n", sum.iterations, cost,
+                    new_cost, rho, lambda);
+      }
+      if (rho > 0.0) {
+        ++sum.successful_steps;
+        const double old_cost = cost;
+        cost = new_cost;
+        const double t = 2.0 * rho - 1.0;
+        lambda *= std::max(1.0 / 3.0, 1.0 - t * t * t);
+        nu = 2.0;
+        if (old_cost - new_cost <= options_.function_tolerance * old_cost) {
+          return done(sum, cost, lambda, Termination::kFunctionTolerance,
+                      "relative decrease " + num((old_cost - new_cost) / old_cost), finish);
+        }
+        LinearizeTimes lt2;
+        double c2 = 0.0;
+        ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err);
+        sum.time_evaluate += lt2.evaluate;
+        sum.time_assemble += lt2.assemble;
+        if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
+          return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
+        if (!g_.allFinite()) {
+          problem->find_non_finite_jacobian(&err);
+          return done(sum, cost, lambda, Termination::kNonFiniteJacobian, err.what, finish);
+        }
+        relinearized = true;
+      } else {
+        ++sum.unsuccessful_steps;
+        lambda *= nu;
+        nu *= 2.0;
+        if (lambda > options_.max_lambda) {
+          return done(sum, cost, lambda, Termination::kNoDecrease,
+                      "lambda " + num(lambda) + " > max_lambda; " +
+                          (step_ok ? std::string("no step decreases the cost")
+                                   : std::string("last step: ") + solver_->message()),
+                      finish);
+        }
+      }
+    }
+  }
+
+ private:
+  template <typename Finish>
+  Summary done(Summary& sum, double cost, double lambda, Termination t, const std::string& msg,
+               const Finish& finish) const {
+    sum.final_cost = cost;
+    sum.final_lambda = lambda;
+    sum.factor_nnz = solver_->factor_nnz();
+    return finish(t, msg);
+  }
+
+  static std::string num(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.3g", v);
+    return b;
+  }
+
+  static std::unique_ptr<LinearSolver> make_solver(LinearSolverType t) {
+    switch (t) {
+      case LinearSolverType::kCholmod:
+        return std::make_unique<CholmodSolver>();
+      case LinearSolverType::kSchur:
+        return std::make_unique<SchurSolver>(std::make_unique<CholmodSolver>());
+      case LinearSolverType::kDense:
+        return std::make_unique<DenseSolver>();
+      case LinearSolverType::kSchurDense:
+        return std::make_unique<SchurSolver>(std::make_unique<DenseSolver>());
+    }
+    return std::make_unique<CholmodSolver>();
+  }
+
+  Options options_;
+  std::unique_ptr<LinearSolver> solver_;
+  bool analyzed_ = false;
+  BlockStructure::Pattern pattern_;
+  BlockSparseMatrix H_;
+  Eigen::VectorXd g_, diag_, damp_, rhs_, delta_;
+};
+
+}  // namespace geodrift::solver

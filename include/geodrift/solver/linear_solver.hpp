@@ -1,0 +1,56 @@
+#pragma once
+
+/// @file
+/// LinearSolver: the interface LevenbergMarquardt uses to solve H·x = b for a symmetric
+/// positive definite block-sparse H (the damped normal equations).
+
+#include <string>
+
+#include "geodrift/solver/block_sparse_matrix.hpp"
+#include "geodrift/solver/block_structure.hpp"
+
+namespace geodrift::solver {
+
+/// Outcome of a linear-solver step. kNotPositiveDefinite is a numerical outcome (LM rejects the
+/// step and raises λ); kFatal ends the solve (out of memory, invalid input, ...).
+enum class LinearSolverStatus { kSuccess, kNotPositiveDefinite, kFatal };
+
+inline const char* to_string(LinearSolverStatus s) {
+  switch (s) {
+    case LinearSolverStatus::kSuccess:
+      return "success";
+    case LinearSolverStatus::kNotPositiveDefinite:
+      return "not positive definite";
+    case LinearSolverStatus::kFatal:
+      return "fatal";
+  }
+  return "?";
+}
+
+/// analyze() once per pattern, factorize() every iteration (values only), solve() per step.
+/// One virtual call per phase and iteration (never per residual).
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  LinearSolver() = default;
+  LinearSolver(const LinearSolver&) = delete;
+  LinearSolver& operator=(const LinearSolver&) = delete;
+
+  /// Symbolic analysis of `s` (ordering, memory); values are not read.
+  virtual LinearSolverStatus analyze(const BlockStructure& s) = 0;
+  /// Numeric factorisation of H (pattern = the analysed one).
+  virtual LinearSolverStatus factorize(const BlockSparseMatrix& H) = 0;
+  /// x = H⁻¹·b with the last factorisation; b and x have H.rows() entries (may not alias).
+  virtual LinearSolverStatus solve(const double* b, double* x) = 0;
+  /// Name for reports ("cholmod", "schur+cholmod", "dense").
+  virtual std::string name() const = 0;
+  /// Detail of the last non-success status (empty otherwise).
+  const std::string& message() const { return message_; }
+  /// Nonzeros of the factor (0 if unknown), for reports.
+  virtual double factor_nnz() const { return 0.0; }
+
+ protected:
+  std::string message_;
+};
+
+}  // namespace geodrift::solver

@@ -1,0 +1,589 @@
+#pragma once
+
+/// @file
+/// Problem: a nonlinear least-squares problem  min ½ Σ_k ρ_k(|W_k·r_k(x)|²)  over parameter
+/// blocks on manifolds. It owns the residual blocks; the caller owns the states.
+///
+/// @code
+///   solver::Problem problem;
+///   problem.add_residual_block(RelativePoseResidual<lie::SE3d>{Z_ij}, RobustLoss(),
+///                              information_6x6, &T[i], &T[j]);   // states: lie::SE3d T[n]
+///   problem.set_constant(&T[0]);                                  // fix the gauge
+///   solver::LevenbergMarquardt lm(options);
+///   const solver::Summary summary = lm.solve(&problem);           // finalizes if needed
+/// @endcode
+///
+/// Parameters are passed as pointers: `T*` for a type with Manifold<T> (Eigen::Vector3d,
+/// lie::SE3d, ...), or `solver::euclidean<N>(double*)` for a raw array of N doubles. The
+/// state must stay at the same address while the Problem refers to it.
+///
+/// Weights (the square-root weight W applied to r before the loss):
+///   - `double lambda`: scalar information, W = √λ (cost ½λ|r|² with the trivial loss);
+///   - `Eigen::Matrix<double, N, N> information`: W = Lᵀ with Λ = L·Lᵀ (cost ½ rᵀΛr);
+///   - `SqrtInformation<N>{W}`: W given directly.
+///
+/// Rows of the full Jacobian (evaluate_jacobian) follow the order residual blocks were added;
+/// columns follow ParameterBlock::col (insertion order of free blocks; with the Schur ordering,
+/// the eliminable R^3 blocks come last).
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <type_traits>
+#include <typeindex>
+#include <typeinfo>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "geodrift/error.hpp"
+#include "geodrift/solver/block_sparse_matrix.hpp"
+#include "geodrift/solver/block_structure.hpp"
+#include "geodrift/solver/loss.hpp"
+#include "geodrift/solver/manifold.hpp"
+#include "geodrift/solver/parameter_block.hpp"
+#include "geodrift/solver/residual_block.hpp"
+
+namespace geodrift::solver {
+
+/// A square-root information matrix W (r is weighted as W·r), given directly.
+template <int N>
+struct SqrtInformation {
+  Eigen::Matrix<double, N, N> matrix;
+};
+
+/// Where and why an evaluation failed.
+struct EvaluationError {
+  int residual_id = -1;  ///< insertion order of the failing residual block
+  std::string what;      ///< e.g. "residual block 12 (RelativePoseResidual) returned false"
+};
+
+/// Time split of one linearisation (seconds).
+struct LinearizeTimes {
+  double evaluate = 0.0;  ///< residuals + Jacobians (+ weights, loss)
+  double assemble = 0.0;  ///< H += JᵀJ, g += Jᵀr
+};
+
+namespace detail {
+
+template <typename Ptr>
+struct ParamOf;
+template <typename T>
+struct ParamOf<T*> {
+  using type = T;
+  static T* state(T* p) { return p; }
+};
+template <int N>
+struct ParamOf<EuclideanPtr<N>> {
+  using type = Euclidean<N>;
+  static double* state(EuclideanPtr<N> p) { return p.ptr; }
+};
+
+/// Type-erased group of parameter blocks of one manifold type (one virtual call per group and
+/// iteration for plus / save / restore).
+class ParameterGroupBase {
+ public:
+  virtual ~ParameterGroupBase() = default;
+  virtual void add(int block) = 0;
+  virtual void plus(const std::vector<ParameterBlock>& blocks, const double* delta) = 0;
+  virtual void save(const std::vector<ParameterBlock>& blocks) = 0;
+  virtual void restore(const std::vector<ParameterBlock>& blocks) = 0;
+  virtual double ambient_squared_norm(const std::vector<ParameterBlock>& blocks) const = 0;
+};
+
+template <typename P>
+class ParameterGroup final : public ParameterGroupBase {
+ public:
+  using M = Manifold<P>;
+  using State = typename M::State;
+  void add(int block) override {
+    blocks_.push_back(block);
+    backup_.emplace_back();
+  }
+  void plus(const std::vector<ParameterBlock>& blocks, const double* delta) override {
+    for (int b : blocks_) {
+      const ParameterBlock& pb = blocks[b];
+      if (pb.col >= 0) M::plus_in_place(static_cast<State*>(pb.state), delta + pb.col);
+    }
+  }
+  void save(const std::vector<ParameterBlock>& blocks) override {
+    for (std::size_t k = 0; k < blocks_.size(); ++k) {
+      const ParameterBlock& pb = blocks[blocks_[k]];
+      if (pb.col >= 0) M::save(static_cast<const State*>(pb.state), &backup_[k]);
+    }
+  }
+  void restore(const std::vector<ParameterBlock>& blocks) override {
+    for (std::size_t k = 0; k < blocks_.size(); ++k) {
+      const ParameterBlock& pb = blocks[blocks_[k]];
+      if (pb.col >= 0) M::restore(backup_[k], static_cast<State*>(pb.state));
+    }
+  }
+  double ambient_squared_norm(const std::vector<ParameterBlock>& blocks) const override {
+    double s = 0.0;
+    for (int b : blocks_) {
+      const ParameterBlock& pb = blocks[b];
+      if (pb.col >= 0) s += M::ambient_squared_norm(*static_cast<const State*>(pb.state));
+    }
+    return s;
+  }
+
+ private:
+  std::vector<int> blocks_;
+  std::vector<typename M::Storage> backup_;
+};
+
+/// Type-erased container of residual blocks of one type (one virtual call per container).
+class ResidualContainerBase {
+ public:
+  virtual ~ResidualContainerBase() = default;
+  virtual int size() const = 0;
+  virtual int num_residuals() const = 0;  ///< rows per block
+  virtual const char* functor_name() const = 0;
+  /// Parameter block ids of residual k (into Problem's block list).
+  virtual void parameter_ids(int k, std::vector<int>* ids) const = 0;
+  virtual int id(int k) const = 0;
+  /// Records columns and H offsets (after the structure is built).
+  virtual void finalize(const std::vector<ParameterBlock>& blocks, const BlockStructure& s) = 0;
+  /// Cost-only evaluation of blocks [begin, end); false + *failed = k on the first failure.
+  virtual bool cost(int begin, int end, double* cost, int* failed) const = 0;
+  /// Evaluates and accumulates blocks [begin, end) into H, g.
+  virtual bool linearize(int begin, int end, double* H, double* g, double* cost, int* failed,
+                         LinearizeTimes* times) = 0;
+  /// Writes the weighted, corrected residual and Jacobian rows of block k (tests).
+  virtual bool jacobian(int k, int row, std::vector<Eigen::Triplet<double>>* triplets,
+                        Eigen::VectorXd* residuals, double* cost) const = 0;
+  /// Whether the Jacobian of block k is finite (slow; diagnostics only).
+  virtual bool jacobian_finite(int k) const = 0;
+};
+
+template <typename Functor, typename... Params>
+class ResidualContainer final : public ResidualContainerBase {
+ public:
+  using Block = ResidualBlock<Functor, Params...>;
+  using Residual = typename Block::Residual;
+  using Jacobians = typename Block::Jacobians;
+  using SqrtInfo = typename Block::SqrtInformation;
+  static constexpr int kChunk = 32;
+
+  std::vector<Block> blocks;
+  std::vector<SqrtInfo> sqrt_infos;
+  std::vector<std::array<int, sizeof...(Params)>> param_ids;
+
+  int size() const override { return static_cast<int>(blocks.size()); }
+  int num_residuals() const override { return Block::kNumResiduals; }
+  const char* functor_name() const override { return typeid(Functor).name(); }
+  void parameter_ids(int k, std::vector<int>* ids) const override {
+    ids->assign(param_ids[k].begin(), param_ids[k].end());
+  }
+  int id(int k) const override { return blocks[k].id(); }
+
+  void finalize(const std::vector<ParameterBlock>& pbs, const BlockStructure& s) override {
+    for (std::size_t k = 0; k < blocks.size(); ++k) {
+      Block& b = blocks[k];
+      const auto& ids = param_ids[k];
+      for (int i = 0; i < Block::kNumParams; ++i) b.col_[i] = pbs[ids[i]].col;
+      for (int i = 0; i < Block::kNumParams; ++i) {
+        for (int j = i; j < Block::kNumParams; ++j) {
+          const int p = Block::pair_index(i, j);
+          const int bi = pbs[ids[i]].index, bj = pbs[ids[j]].index;
+          if (bi < 0 || bj < 0) {
+            b.off_[p] = -1;
+            continue;
+          }
+          const int lo = std::min(bi, bj), hi = std::max(bi, bj);
+          b.off_[p] = s.block_offset(lo, hi);
+          b.stride_[p] = s.column_height(hi);
+          GEODRIFT_ASSERT(b.off_[p] >= 0);
+        }
+      }
+    }
+  }
+
+  bool cost(int begin, int end, double* cost, int* failed) const override {
+    double c = 0.0;
+    Residual r;
+    for (int k = begin; k < end; ++k) {
+      double ck;
+      if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r, nullptr)) {
+        *failed = k;
+        return false;
+      }
+      c += ck;
+    }
+    *cost += c;
+    return true;
+  }
+
+  bool linearize(int begin, int end, double* H, double* g, double* cost, int* failed,
+                 LinearizeTimes* times) override {
+    using Clock = std::chrono::steady_clock;
+    double c = 0.0;
+    for (int k0 = begin; k0 < end; k0 += kChunk) {
+      const int k1 = std::min(end, k0 + kChunk);
+      const auto t0 = Clock::now();
+      for (int k = k0; k < k1; ++k) {
+        double ck;
+        if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r_[k - k0], &J_[k - k0])) {
+          *failed = k;
+          return false;
+        }
+        c += ck;
+      }
+      const auto t1 = Clock::now();
+      for (int k = k0; k < k1; ++k) blocks[k].accumulate(r_[k - k0], J_[k - k0], H, g);
+      const auto t2 = Clock::now();
+      times->evaluate += std::chrono::duration<double>(t1 - t0).count();
+      times->assemble += std::chrono::duration<double>(t2 - t1).count();
+    }
+    *cost += c;
+    return true;
+  }
+
+  bool jacobian(int k, int row, std::vector<Eigen::Triplet<double>>* triplets,
+                Eigen::VectorXd* residuals, double* cost) const override {
+    Residual r;
+    Jacobians J;
+    double ck;
+    if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r, &J)) return false;
+    *cost += ck;
+    residuals->segment<Block::kNumResiduals>(row) = r;
+    detail::static_for<sizeof...(Params)>([&](auto i) {
+      const int col = blocks[k].col_[i];
+      if (col < 0) return;
+      const auto& Ji = std::get<i>(J);
+      for (int cc = 0; cc < Ji.cols(); ++cc)
+        for (int rr = 0; rr < Ji.rows(); ++rr)
+          triplets->emplace_back(row + rr, col + cc, Ji(rr, cc));
+    });
+    return true;
+  }
+
+  bool jacobian_finite(int k) const override {
+    Residual r;
+    Jacobians J;
+    double ck;
+    if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r, &J)) return false;
+    bool ok = true;
+    detail::static_for<sizeof...(Params)>([&](auto i) {
+      if (blocks[k].col_[i] >= 0) ok = ok && std::get<i>(J).allFinite();
+    });
+    return ok;
+  }
+
+ private:
+  std::array<Residual, kChunk> r_;
+  std::array<Jacobians, kChunk> J_;
+};
+
+}  // namespace detail
+
+class Problem {
+ public:
+  Problem() = default;
+  Problem(const Problem&) = delete;
+  Problem& operator=(const Problem&) = delete;
+  Problem(Problem&&) = default;
+  Problem& operator=(Problem&&) = default;
+
+  /// Adds the residual functor(x_1, ..., x_n) with a robust loss and a weight (see the file
+  /// comment for the weight forms).
+  /// @return the residual block id (insertion order, 0-based).
+  /// @throws InvalidArgument if a state pointer is null, the same state appears twice in the
+  ///         block, a state was registered before with a different type, or the weight is not
+  ///         finite / positive (definite).
+  template <typename Functor, typename Weight, typename... Ptrs>
+  int add_residual_block(Functor functor, const RobustLoss& loss, const Weight& weight,
+                         Ptrs... ptrs) {
+    using Container = detail::ResidualContainer<Functor, typename detail::ParamOf<Ptrs>::type...>;
+    using Block = typename Container::Block;
+    constexpr int kN = Functor::kNumResiduals;
+    Container* c = container<Container>();
+
+    std::array<int, sizeof...(Ptrs)> ids{
+        parameter_id<typename detail::ParamOf<Ptrs>::type>(detail::ParamOf<Ptrs>::state(ptrs))...};
+    for (std::size_t a = 0; a < ids.size(); ++a)
+      for (std::size_t b = a + 1; b < ids.size(); ++b)
+        GEODRIFT_CHECK(ids[a] != ids[b], "add_residual_block: parameters "
+                                             << a << " and " << b << " are the same state");
+    double sqrt_w = 1.0;
+    int info_index = -1;
+    if constexpr (std::is_arithmetic_v<Weight>) {
+      GEODRIFT_CHECK(
+          std::isfinite(double(weight)) && weight > 0,
+          "add_residual_block: scalar information " << weight << " is not finite and > 0");
+      sqrt_w = std::sqrt(double(weight));
+    } else if constexpr (std::is_same_v<Weight, SqrtInformation<kN>>) {
+      GEODRIFT_CHECK(weight.matrix.allFinite(),
+                     "add_residual_block: square-root information is not finite");
+      info_index = static_cast<int>(c->sqrt_infos.size());
+      c->sqrt_infos.push_back(weight.matrix);
+    } else {
+      static_assert(std::is_same_v<Weight, Eigen::Matrix<double, kN, kN>>,
+                    "weight must be a double (information), an NxN information matrix, or "
+                    "SqrtInformation<N>, N = Functor::kNumResiduals");
+      GEODRIFT_CHECK(weight.allFinite(), "add_residual_block: information matrix not finite");
+      const Eigen::Matrix<double, kN, kN> sym = 0.5 * (weight + weight.transpose());
+      const Eigen::LLT<Eigen::Matrix<double, kN, kN>> llt(sym);
+      GEODRIFT_CHECK(llt.info() == Eigen::Success,
+                     "add_residual_block: information matrix is not positive definite");
+      info_index = static_cast<int>(c->sqrt_infos.size());
+      c->sqrt_infos.push_back(llt.matrixU());  // W = Lᵀ: |W·r|² = rᵀΛr
+    }
+    const int id = static_cast<int>(order_.size());
+    c->blocks.emplace_back(std::move(functor), loss, sqrt_w, info_index,
+                           typename Block::States{detail::ParamOf<Ptrs>::state(ptrs)...}, id);
+    c->param_ids.push_back(ids);
+    order_.emplace_back(container_index_[std::type_index(typeid(Container))], c->size() - 1);
+    for (int b : ids) ++params_[b].num_residuals;
+    finalized_ = false;
+    return id;
+  }
+
+  /// Holds a state fixed (no columns). Gauge fixing: set the first pose constant.
+  /// @throws InvalidArgument if the state was never added to a residual block.
+  void set_constant(const void* state) {
+    params_.at(lookup(state)).constant = true;
+    finalized_ = false;
+  }
+  /// Frees a constant state again.
+  void set_variable(const void* state) {
+    params_.at(lookup(state)).constant = false;
+    finalized_ = false;
+  }
+  bool is_constant(const void* state) const { return params_.at(lookup(state)).constant; }
+  bool has_parameter(const void* state) const { return index_.count(state) > 0; }
+
+  /// Builds the column layout and the pattern of H (once; again only after a change).
+  /// @param schur_ordering put R^3 blocks that are never coupled to another R^3 block (BA
+  ///        points) last and mark them eliminable (BlockStructure::num_eliminated()).
+  void finalize(bool schur_ordering = false) {
+    // Eliminable: free, R^3, and no residual touches two of them.
+    for (auto& p : params_)
+      p.eliminable = schur_ordering && !p.constant && p.dof == 3 && p.ambient == 3;
+    std::vector<int> ids;
+    if (schur_ordering) {
+      for (const auto& c : containers_) {
+        for (int k = 0; k < c->size(); ++k) {
+          c->parameter_ids(k, &ids);
+          int n = 0;
+          for (int b : ids) n += params_[b].eliminable ? 1 : 0;
+          if (n > 1)
+            for (int b : ids) params_[b].eliminable = false;
+        }
+      }
+    }
+    std::vector<int> sizes;
+    int index = 0, col = 0, num_elim = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+      for (auto& p : params_) {
+        if (p.constant) {
+          p.index = p.col = -1;
+          continue;
+        }
+        if (p.eliminable != (pass == 1)) continue;
+        p.index = index++;
+        p.col = col;
+        col += p.dof;
+        sizes.push_back(p.dof);
+        if (pass == 1) ++num_elim;
+      }
+    }
+    std::vector<std::pair<int, int>> couplings;
+    for (const auto& c : containers_) {
+      for (int k = 0; k < c->size(); ++k) {
+        c->parameter_ids(k, &ids);
+        for (std::size_t a = 0; a < ids.size(); ++a)
+          for (std::size_t b = a + 1; b < ids.size(); ++b)
+            if (params_[ids[a]].index >= 0 && params_[ids[b]].index >= 0)
+              couplings.emplace_back(params_[ids[a]].index, params_[ids[b]].index);
+      }
+    }
+    structure_ = std::make_unique<BlockStructure>();
+    structure_->build(sizes, std::move(couplings), num_elim);
+    for (auto& c : containers_) c->finalize(params_, *structure_);
+    row_.assign(order_.size() + 1, 0);
+    for (std::size_t i = 0; i < order_.size(); ++i)
+      row_[i + 1] = row_[i] + containers_[order_[i].first]->num_residuals();
+    finalized_ = true;
+    schur_ordering_ = schur_ordering;
+    ++generation_;
+  }
+
+  bool is_finalized() const { return finalized_; }
+  bool has_schur_ordering() const { return schur_ordering_; }
+  /// Increments on every finalize(): a solver may keep its symbolic analysis while it is equal.
+  std::uint64_t generation() const { return generation_; }
+  const BlockStructure& structure() const {
+    GEODRIFT_CHECK(finalized_, "Problem::structure() before finalize()");
+    return *structure_;
+  }
+
+  int num_residual_blocks() const { return static_cast<int>(order_.size()); }
+  int num_parameter_blocks() const { return static_cast<int>(params_.size()); }
+  /// Total residual rows.
+  int num_residuals() const { return row_.empty() ? 0 : row_.back(); }
+  /// Free tangent columns (after finalize()).
+  int num_effective_parameters() const { return finalized_ ? structure_->num_cols() : 0; }
+  const std::vector<ParameterBlock>& parameter_blocks() const { return params_; }
+  /// The block record of a state (col/index are valid after finalize()).
+  const ParameterBlock& parameter_block(const void* state) const {
+    return params_.at(lookup(state));
+  }
+
+  /// Cost ½Σρ(|W·r|²) at the current states. @return false (and *error) if a block fails.
+  bool evaluate_cost(double* cost, EvaluationError* error = nullptr) const {
+    *cost = 0.0;
+    for (const auto& c : containers_) {
+      int failed = -1;
+      if (!c->cost(0, c->size(), cost, &failed)) {
+        set_error(*c, failed, "returned false or a non-finite residual", error);
+        return false;
+      }
+    }
+    return true;
+  }
+
+  /// Evaluates residuals and Jacobians at the current states and writes H = J̃ᵀJ̃ (values on
+  /// structure()) and g = J̃ᵀr̃ (J̃, r̃: weighted, Triggs-corrected). H and g are overwritten.
+  /// @param g num_effective_parameters() doubles.
+  bool linearize(BlockSparseMatrix* H, double* g, double* cost, LinearizeTimes* times,
+                 EvaluationError* error = nullptr) {
+    GEODRIFT_CHECK(finalized_, "Problem::linearize() before finalize()");
+    H->set_zero();
+    std::fill(g, g + structure_->num_cols(), 0.0);
+    *cost = 0.0;
+    for (auto& c : containers_) {
+      int failed = -1;
+      if (!c->linearize(0, c->size(), H->values(), g, cost, &failed, times)) {
+        set_error(*c, failed, "returned false or a non-finite residual", error);
+        return false;
+      }
+    }
+    return true;
+  }
+
+  /// Finds the first residual block with a non-finite Jacobian (diagnostics, slow).
+  bool find_non_finite_jacobian(EvaluationError* error) const {
+    for (const auto& c : containers_)
+      for (int k = 0; k < c->size(); ++k)
+        if (!c->jacobian_finite(k)) {
+          set_error(*c, k, "has a non-finite Jacobian", error);
+          return true;
+        }
+    return false;
+  }
+
+  /// The full weighted, loss-corrected Jacobian J̃ (num_residuals() x num_effective_parameters())
+  /// and residual r̃ at the current states (tests; allocates). Finalizes if needed.
+  /// @return false if a block cannot be evaluated.
+  bool evaluate_jacobian(Eigen::SparseMatrix<double>* J, Eigen::VectorXd* residuals,
+                         double* cost = nullptr) {
+    if (!finalized_) finalize(schur_ordering_);
+    std::vector<Eigen::Triplet<double>> t;
+    residuals->setZero(num_residuals());
+    double c = 0.0;
+    for (std::size_t i = 0; i < order_.size(); ++i) {
+      const auto& [ci, k] = order_[i];
+      if (!containers_[ci]->jacobian(k, row_[i], &t, residuals, &c)) return false;
+    }
+    J->resize(num_residuals(), structure_->num_cols());
+    J->setFromTriplets(t.begin(), t.end());
+    if (cost) *cost = c;
+    return true;
+  }
+
+  /// x ← x ⊞ delta for every free block (delta: num_effective_parameters() doubles, in column
+  /// order).
+  void plus(const double* delta) {
+    for (auto& g : groups_) g->plus(params_, delta);
+  }
+  /// Copies / restores every free state (LM's rollback of a rejected step; no allocation).
+  void save_state() {
+    for (auto& g : groups_) g->save(params_);
+  }
+  void restore_state() {
+    for (auto& g : groups_) g->restore(params_);
+  }
+  /// |x| over free blocks in ambient coordinates (Manifold::ambient_squared_norm).
+  double state_norm() const {
+    double s = 0.0;
+    for (const auto& g : groups_) s += g->ambient_squared_norm(params_);
+    return std::sqrt(s);
+  }
+
+ private:
+  template <typename Container>
+  Container* container() {
+    const std::type_index key(typeid(Container));
+    auto it = container_index_.find(key);
+    if (it != container_index_.end()) return static_cast<Container*>(containers_[it->second].get());
+    container_index_.emplace(key, static_cast<int>(containers_.size()));
+    containers_.push_back(std::make_unique<Container>());
+    return static_cast<Container*>(containers_.back().get());
+  }
+
+  template <typename P>
+  int parameter_id(typename Manifold<P>::State* state) {
+    GEODRIFT_CHECK(state != nullptr, "add_residual_block: null parameter pointer");
+    const std::type_index type(typeid(P));
+    auto it = index_.find(state);
+    if (it != index_.end()) {
+      GEODRIFT_CHECK(params_[it->second].type == type, "add_residual_block: state at "
+                                                           << static_cast<const void*>(state)
+                                                           << " was added before as another type");
+      return it->second;
+    }
+    ParameterBlock pb;
+    pb.state = state;
+    pb.type = type;
+    pb.dof = Manifold<P>::kDoF;
+    pb.ambient = Manifold<P>::kAmbient;
+    const int id = static_cast<int>(params_.size());
+    params_.push_back(pb);
+    index_.emplace(state, id);
+    auto g = group_index_.find(type);
+    if (g == group_index_.end()) {
+      g = group_index_.emplace(type, static_cast<int>(groups_.size())).first;
+      groups_.push_back(std::make_unique<detail::ParameterGroup<P>>());
+    }
+    groups_[g->second]->add(id);
+    return id;
+  }
+
+  int lookup(const void* state) const {
+    auto it = index_.find(state);
+    GEODRIFT_CHECK(it != index_.end(),
+                   "state at " << state << " is not a parameter of this problem");
+    return it->second;
+  }
+
+  static void set_error(const detail::ResidualContainerBase& c, int k, const char* what,
+                        EvaluationError* error) {
+    if (!error) return;
+    error->residual_id = c.id(k);
+    std::ostringstream os;
+    os << "residual block " << c.id(k) << " (functor " << c.functor_name() << ") " << what;
+    error->what = os.str();
+  }
+
+  std::vector<ParameterBlock> params_;
+  std::unordered_map<const void*, int> index_;
+  std::vector<std::unique_ptr<detail::ParameterGroupBase>> groups_;
+  std::unordered_map<std::type_index, int> group_index_;
+  std::vector<std::unique_ptr<detail::ResidualContainerBase>> containers_;
+  std::unordered_map<std::type_index, int> container_index_;
+  std::vector<std::pair<int, int>> order_;  ///< residual id -> (container, index)
+  std::vector<int> row_;                    ///< residual id -> first row
+  std::unique_ptr<BlockStructure> structure_;
+  bool finalized_ = false;
+  bool schur_ordering_ = false;
+  std::uint64_t generation_ = 0;
+};
+
+}  // namespace geodrift::solver

@@ -1,0 +1,90 @@
+#pragma once
+
+/// @file
+/// Pose-graph residuals on a Lie group (SE3d or Sim3d; any group with log(J*), adjoint(),
+/// inverse(), operator*). All Jacobians are w.r.t. LEFT perturbations X ← exp(δ)·X, in the
+/// group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
+
+#include <Eigen/Core>
+
+#include "geodrift/lie/se3.hpp"
+#include "geodrift/lie/sim3.hpp"
+
+namespace geodrift::solver {
+
+/// Relative-pose edge  r = log(dS_ij · S_i · S_j⁻¹) ∈ R^kDoF.
+///
+/// With world→body poses S_i = S_iw (DESIGN.md's S_cw), the measurement is
+/// dS_ij = (S_i·S_j⁻¹)⁻¹ at the optimum, i.e. dS_ij = S_jw·S_iw⁻¹ frozen before optimisation
+/// (the paper's e1/e2). For a g2o edge Z_ij = T_wi⁻¹·T_wj with vertices stored as T_iw = T_wi⁻¹:
+/// dS_ij = Z_ij⁻¹, so r = log(Z_ij⁻¹·T_iw·T_jw⁻¹), and the information matrix must be in
+/// (ω, ν) order.
+///
+///   J_r_Si = Jl⁻¹(r)·Ad(dS_ij)       (dS·exp(d)·S_i·S_j⁻¹ = exp(Ad(dS)·d)·E)
+///   J_r_Sj = −Jl⁻¹(r)·Ad(E)          (E·exp(−d) = exp(−Ad(E)·d)·E),  E = dS_ij·S_i·S_j⁻¹
+template <typename Group>
+struct RelativePoseResidual {
+  static constexpr int kNumResiduals = Group::kDoF;
+  using Vec = Eigen::Matrix<double, Group::kDoF, 1>;
+  using Mat = Eigen::Matrix<double, Group::kDoF, Group::kDoF>;
+
+  Group dS_ij;  ///< measurement (see above)
+
+  bool operator()(const Group& S_i, const Group& S_j, Vec* r, Mat* J_r_Si = nullptr,
+                  Mat* J_r_Sj = nullptr) const {
+    const Group E = dS_ij * S_i * S_j.inverse();
+    if (!J_r_Si && !J_r_Sj) {
+      *r = E.log();
+      return true;
+    }
+    Mat Jl_inv;
+    *r = E.log(&Jl_inv);
+    if (J_r_Si) J_r_Si->noalias() = Jl_inv * dS_ij.adjoint();
+    if (J_r_Sj) J_r_Sj->noalias() = -Jl_inv * E.adjoint();
+    return true;
+  }
+};
+
+/// Prior on one pose  r = log(S · S_prior⁻¹),  J_r_S = Jl⁻¹(r).
+template <typename Group>
+struct PosePriorResidual {
+  static constexpr int kNumResiduals = Group::kDoF;
+  using Vec = Eigen::Matrix<double, Group::kDoF, 1>;
+  using Mat = Eigen::Matrix<double, Group::kDoF, Group::kDoF>;
+
+  Group S_prior;
+
+  bool operator()(const Group& S, Vec* r, Mat* J_r_S = nullptr) const {
+    const Group E = S * S_prior.inverse();
+    *r = E.log(J_r_S);
+    return true;
+  }
+};
+
+/// Camera-centre prior for a world→camera pose S_cw (SE3 or Sim3):
+/// r = c(S) − y, c = S⁻¹·0 = −(1/s)·Rᵀ·t (DESIGN.md), y a position in W (metres).
+/// Left perturbation S ← exp(δ)·S gives c ← S⁻¹·exp(−δ)·0, so
+///   J_r_S = −J_{S⁻¹·p}/∂p · ∂(exp(−δ)·0)/∂δ = −(R_S⁻¹·s⁻¹) · [0 (| 0) | I]   (the ν block).
+template <typename Group>
+struct CameraCentrePriorResidual {
+  static constexpr int kNumResiduals = 3;
+  using Vec = Eigen::Matrix<double, 3, 1>;
+  using Mat = Eigen::Matrix<double, 3, Group::kDoF>;
+
+  Eigen::Vector3d y;  ///< target position in W
+
+  bool operator()(const Group& S, Vec* r, Mat* J_r_S = nullptr) const {
+    const Group S_inv = S.inverse();
+    Eigen::Matrix<double, 3, 3> J_p;
+    const Eigen::Vector3d c = S_inv.act(Eigen::Vector3d::Zero(), nullptr, &J_p);
+    *r = c - y;
+    if (J_r_S) {
+      // exp(δ)·0 to first order = ν (the translation part of δ).
+      J_r_S->setZero();
+      J_r_S->template rightCols<3>() = -J_p;
+    }
+    return true;
+  }
+};
+
+}  // namespace geodrift::solver

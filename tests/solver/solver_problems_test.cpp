@@ -1,0 +1,351 @@
+// Whole problems: pose graphs (SE3, Sim3) and bundle adjustment, their assembled Jacobians and
+// normal equations checked numerically, and every linear-solver path reaching the same optimum.
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "geodrift/lie/se3.hpp"
+#include "geodrift/lie/sim3.hpp"
+#include "geodrift/solver/dense_solver.hpp"
+#include "geodrift/solver/levenberg_marquardt.hpp"
+#include "geodrift/solver/problem.hpp"
+#include "geodrift/solver/residuals/relative_pose.hpp"
+#include "geodrift/solver/residuals/reprojection.hpp"
+#include "geodrift/solver/schur.hpp"
+#include "support/numeric_jacobian.hpp"
+#include "support/samples.hpp"
+
+using namespace geodrift;
+using solver::LevenbergMarquardt;
+using solver::LinearSolverType;
+using solver::Options;
+using solver::Problem;
+using solver::RobustLoss;
+using solver::Termination;
+
+namespace {
+
+template <class G>
+typename G::Tangent noise_tangent(std::mt19937& rng, double rot, double trans, double sigma) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  typename G::Tangent xi;
+  const Eigen::Vector3d w(n(rng) * rot, n(rng) * rot, n(rng) * rot);
+  const Eigen::Vector3d v(n(rng) * trans, n(rng) * trans, n(rng) * trans);
+  if constexpr (G::kDoF == 6) {
+    xi << w, v;
+  } else {
+    xi << w, n(rng) * sigma, v;
+  }
+  return xi;
+}
+
+/// A loop-shaped pose graph with world→body poses: chain edges (i, i+1), (i, i+2) and a few
+/// loop closures. Measurements dS_ij = S_j·S_i⁻¹ (exact) or with noise.
+template <class G>
+struct PoseGraph {
+  std::vector<G> truth, poses;
+  struct Edge {
+    int i, j;
+    G dS;
+  };
+  std::vector<Edge> edges;
+  Eigen::Matrix<double, G::kDoF, G::kDoF> info;
+
+  PoseGraph(int n, double noise, unsigned seed) {
+    std::mt19937 rng(seed);
+    for (int k = 0; k < n; ++k) {
+      const double a = 2.0 * M_PI * k / n;
+      const lie::SO3d R = lie::SO3d::exp(Eigen::Vector3d(0.1 * std::sin(3 * a), 0.05, a));
+      const Eigen::Vector3d c(20.0 * std::cos(a), 20.0 * std::sin(a), 0.5 * std::sin(2 * a));
+      // world→body: t = −R·c (scaled for Sim3)
+      const lie::SE3d T_bw = lie::SE3d(R, c).inverse();
+      if constexpr (G::kDoF == 6) {
+        truth.push_back(T_bw);
+      } else {
+        const double s = std::exp(0.3 * std::sin(a));
+        truth.push_back(G(T_bw.rotation(), s * T_bw.translation(), s));
+      }
+    }
+    const auto add = [&](int i, int j) {
+      const G dS =
+          G::exp(noise_tangent<G>(rng, noise, noise, noise)) * truth[j] * truth[i].inverse();
+      edges.push_back({i, j, dS});
+    };
+    for (int k = 0; k + 1 < n; ++k) add(k, k + 1);
+    for (int k = 0; k + 2 < n; ++k) add(k, k + 2);
+    for (int k = 0; k + n / 2 < n; k += 5) add(k, k + n / 2);
+    add(n - 1, 0);
+    info.setIdentity();
+    info.template topLeftCorner<3, 3>() *= 100.0;  // rotation more certain
+    poses = truth;
+    for (int k = 1; k < n; ++k)
+      poses[k] = G::exp(noise_tangent<G>(rng, 0.05, 0.5, 0.05)) * truth[k];
+  }
+
+  void build(Problem* p, const RobustLoss& loss = RobustLoss()) {
+    for (const auto& e : edges)
+      p->add_residual_block(solver::RelativePoseResidual<G>{e.dS}, loss, info, &poses[e.i],
+                            &poses[e.j]);
+    p->set_constant(&poses[0]);
+  }
+};
+
+/// Small synthetic BA: cameras on a line looking at +z, points in a box in front of them.
+struct BaScene {
+  std::vector<lie::SE3d> cams, cams_truth;
+  std::vector<Eigen::Vector3d> points, points_truth;
+  struct Obs {
+    int cam, point;
+    Eigen::Vector2d uv;
+  };
+  std::vector<Obs> obs;
+  double fx = 500, fy = 510, cx = 320, cy = 240;
+
+  BaScene(int num_cams, int num_points, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> n(0.0, 1.0);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < num_cams; ++i) {
+      const lie::SO3d R =
+          lie::SO3d::exp(Eigen::Vector3d(0.05 * n(rng), 0.05 * n(rng), 0.02 * n(rng)));
+      const Eigen::Vector3d c(1.5 * i - 0.75 * num_cams, 0.3 * n(rng), -12.0);
+      cams_truth.push_back(lie::SE3d(R, -(R.matrix() * c)));
+    }
+    for (int k = 0; k < num_points; ++k)
+      points_truth.emplace_back(4.0 * u(rng), 3.0 * u(rng), 2.0 * u(rng));
+    for (int k = 0; k < num_points; ++k) {
+      for (int i = 0; i < num_cams; ++i) {
+        if ((k + i) % 4 == 3) continue;  // not every camera sees every point
+        const Eigen::Vector3d p = cams_truth[i].act(points_truth[k]);
+        const Eigen::Vector2d uv(fx * p.x() / p.z() + cx + 0.5 * n(rng),
+                                 fy * p.y() / p.z() + cy + 0.5 * n(rng));
+        obs.push_back({i, k, uv});
+      }
+    }
+    cams = cams_truth;
+    for (int i = 2; i < num_cams; ++i)
+      cams[i] = lie::SE3d::exp(noise_tangent<lie::SE3d>(rng, 0.01, 0.1, 0.0)) * cams_truth[i];
+    points = points_truth;
+    for (auto& p : points) p += 0.1 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  }
+
+  void build(Problem* p, const RobustLoss& loss) {
+    for (const auto& o : obs) {
+      solver::ReprojectionResidual r;
+      r.fx = fx;
+      r.fy = fy;
+      r.cx = cx;
+      r.cy = cy;
+      r.uv = o.uv;
+      p->add_residual_block(r, loss, 1.0, &cams[o.cam], &points[o.point]);
+    }
+    p->set_constant(&cams[0]);  // gauge: 6 dof + scale
+    p->set_constant(&cams[1]);
+  }
+};
+
+Options tight(LinearSolverType t) {
+  Options o;
+  o.linear_solver = t;
+  o.max_iterations = 200;
+  o.function_tolerance = 1e-16;
+  o.gradient_tolerance = 1e-13;
+  o.parameter_tolerance = 1e-14;
+  return o;
+}
+
+/// Numeric full Jacobian of the weighted residual vector: column by column, each free block
+/// perturbed on the left through its manifold retraction (the solver's plus()).
+Eigen::MatrixXd numeric_problem_jacobian(Problem* p) {
+  Eigen::SparseMatrix<double> J;
+  Eigen::VectorXd r0, rp, rm;
+  REQUIRE(p->evaluate_jacobian(&J, &r0));
+  const int n = p->num_effective_parameters();
+  Eigen::MatrixXd N(r0.size(), n);
+  const double h = 1e-6;
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(n);
+  for (int c = 0; c < n; ++c) {
+    p->save_state();
+    d.setZero();
+    d[c] = h;
+    p->plus(d.data());
+    REQUIRE(p->evaluate_jacobian(&J, &rp));
+    p->restore_state();
+    d[c] = -h;
+    p->plus(d.data());
+    REQUIRE(p->evaluate_jacobian(&J, &rm));
+    p->restore_state();
+    N.col(c) = (rp - rm) / (2 * h);
+  }
+  return N;
+}
+
+template <class G>
+double max_pose_error(const std::vector<G>& a, const std::vector<G>& b) {
+  double e = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) e = std::max(e, (a[k] * b[k].inverse()).log().norm());
+  return e;
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("Assembled pose-graph Jacobian and normal equations match numeric ones",
+                   "[solver][jacobian]", lie::SE3d, lie::Sim3d) {
+  PoseGraph<TestType> g(8, 0.05, 3);
+  Problem p;
+  g.build(&p);
+  p.finalize();
+  Eigen::SparseMatrix<double> J;
+  Eigen::VectorXd r;
+  REQUIRE(p.evaluate_jacobian(&J, &r));
+  const Eigen::MatrixXd Jd(J), N = numeric_problem_jacobian(&p);
+  CHECK(J.rows() == int(g.edges.size()) * TestType::kDoF);
+  CHECK(J.cols() == 7 * TestType::kDoF);
+  CHECK(test::near(Jd, N, 1e-6, test::rounding_floor(1e3, 1e-6)));
+  // H and g from the block-sparse assembly equal JᵀJ and Jᵀr.
+  solver::BlockSparseMatrix H(&p.structure());
+  Eigen::VectorXd gvec(p.num_effective_parameters());
+  double cost = 0.0;
+  solver::LinearizeTimes t;
+  REQUIRE(p.linearize(&H, gvec.data(), &cost, &t));
+  CHECK(test::near(H.to_dense(), Jd.transpose() * Jd, 1e-12));
+  CHECK(test::near(gvec, Jd.transpose() * r, 1e-12));
+  CHECK(cost == Approx(0.5 * r.squaredNorm()).epsilon(1e-12));
+}
+
+TEMPLATE_TEST_CASE("Noiseless pose graphs reach cost below 1e-20", "[solver]", lie::SE3d,
+                   lie::Sim3d) {
+  PoseGraph<TestType> g(60, 0.0, 5);
+  Problem p;
+  g.build(&p);
+  Options o;
+  o.function_tolerance = 0.0;
+  o.gradient_tolerance = 0.0;
+  o.parameter_tolerance = 0.0;
+  o.max_iterations = 50;
+  LevenbergMarquardt lm(o);
+  const solver::Summary s = lm.solve(&p);
+  INFO(s.brief_report());
+  CHECK(s.initial_cost > 1.0);
+  CHECK(s.final_cost < 1e-20);
+  CHECK(max_pose_error(g.poses, g.truth) < 1e-9);
+  CHECK(s.termination != Termination::kLinearSolverFailure);
+  CHECK(s.termination != Termination::kNonFiniteResidual);
+}
+
+TEST_CASE("A noisy Sim3 pose graph: CHOLMOD and dense reach the same optimum", "[solver]") {
+  PoseGraph<lie::Sim3d> g1(40, 0.01, 11), g2(40, 0.01, 11);
+  Problem p1, p2;
+  g1.build(&p1, RobustLoss::huber(0.5));
+  g2.build(&p2, RobustLoss::huber(0.5));
+  LevenbergMarquardt lm1(tight(LinearSolverType::kCholmod)), lm2(tight(LinearSolverType::kDense));
+  const solver::Summary s1 = lm1.solve(&p1), s2 = lm2.solve(&p2);
+  INFO(s1.brief_report() << "\n" << s2.brief_report());
+  CHECK(s1.converged());
+  CHECK(s2.converged());
+  CHECK(s1.final_cost < 0.01 * s1.initial_cost);
+  CHECK(s1.final_cost == Approx(s2.final_cost).epsilon(1e-10));
+  CHECK(max_pose_error(g1.poses, g2.poses) < 1e-8);
+  CHECK(s1.linear_solver == "cholmod");
+  CHECK(s2.linear_solver == "dense");
+}
+
+TEST_CASE("Assembled BA Jacobian and normal equations match numeric ones", "[solver][jacobian]") {
+  BaScene scene(4, 12, 21);
+  Problem p;
+  scene.build(&p, RobustLoss());
+  p.finalize(/*schur_ordering=*/true);
+  CHECK(p.structure().num_eliminated() == 12);
+  CHECK(p.parameter_block(&scene.points[0]).col == 2 * 6);  // points after the free cameras
+  Eigen::SparseMatrix<double> J;
+  Eigen::VectorXd r;
+  REQUIRE(p.evaluate_jacobian(&J, &r));
+  const Eigen::MatrixXd Jd(J), N = numeric_problem_jacobian(&p);
+  CHECK(test::near(Jd, N, 1e-6, test::rounding_floor(1e3, 1e-6)));
+  solver::BlockSparseMatrix H(&p.structure());
+  Eigen::VectorXd gvec(p.num_effective_parameters());
+  double cost = 0.0;
+  solver::LinearizeTimes t;
+  REQUIRE(p.linearize(&H, gvec.data(), &cost, &t));
+  const Eigen::MatrixXd Hd = Jd.transpose() * Jd;
+  CHECK(test::near(H.to_dense(), Hd, 1e-12));
+  CHECK(test::near(gvec, Jd.transpose() * r, 1e-12));
+
+  // Schur: the reduced camera matrix equals A − B·C⁻¹·Bᵀ, and the solve equals a dense solve.
+  const int nc = 12, n = p.num_effective_parameters();
+  for (int c = 0; c < n; ++c) H.values()[p.structure().diagonal_positions()[c]] += 1e-3;
+  const Eigen::MatrixXd Hdamped = H.to_dense();
+  solver::SchurSolver schur(std::make_unique<solver::DenseSolver>());
+  REQUIRE(schur.analyze(p.structure()) == solver::LinearSolverStatus::kSuccess);
+  REQUIRE(schur.factorize(H) == solver::LinearSolverStatus::kSuccess);
+  const Eigen::MatrixXd A = Hdamped.topLeftCorner(nc, nc), B = Hdamped.topRightCorner(nc, n - nc),
+                        C = Hdamped.bottomRightCorner(n - nc, n - nc);
+  const Eigen::MatrixXd S = A - B * C.inverse() * B.transpose();
+  CHECK(test::near(schur.reduced_matrix().to_dense(), S, 1e-10));
+  Eigen::VectorXd x(n);
+  REQUIRE(schur.solve(gvec.data(), x.data()) == solver::LinearSolverStatus::kSuccess);
+  CHECK(test::near(x, Hdamped.ldlt().solve(gvec), 1e-9));
+}
+
+TEST_CASE("BA: plain sparse, Schur and dense solves reach the same solution", "[solver]") {
+  const LinearSolverType types[] = {LinearSolverType::kCholmod, LinearSolverType::kSchur,
+                                    LinearSolverType::kDense, LinearSolverType::kSchurDense};
+  std::vector<BaScene> scenes;
+  std::vector<solver::Summary> sums;
+  for (const auto t : types) {
+    scenes.emplace_back(6, 60, 31);
+    Problem p;
+    scenes.back().build(&p, RobustLoss::huber(1.0));
+    LevenbergMarquardt lm(tight(t));
+    sums.push_back(lm.solve(&p));
+    INFO(sums.back().brief_report());
+    CHECK(sums.back().converged());
+    CHECK(sums.back().final_cost < 0.05 * sums.back().initial_cost);
+  }
+  CHECK(sums[1].linear_solver == "schur+cholmod");
+  const auto rel = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+    return (a - b).norm() / (1.0 + b.norm());
+  };
+  for (std::size_t k = 1; k < scenes.size(); ++k) {
+    INFO("solver " << k << ": " << sums[k].brief_report());
+    CHECK(sums[k].final_cost == Approx(sums[0].final_cost).epsilon(1e-10));
+    for (std::size_t i = 0; i < scenes[0].cams.size(); ++i) {
+      Eigen::Matrix<double, 7, 1> a, b;
+      a << scenes[k].cams[i].rotation().matrix().reshaped<Eigen::RowMajor>().head<4>(),
+          scenes[k].cams[i].translation();
+      b << scenes[0].cams[i].rotation().matrix().reshaped<Eigen::RowMajor>().head<4>(),
+          scenes[0].cams[i].translation();
+      CHECK(rel(a, b) < 1e-8);
+    }
+    for (std::size_t j = 0; j < scenes[0].points.size(); ++j)
+      CHECK(rel(scenes[k].points[j], scenes[0].points[j]) < 1e-8);
+  }
+}
+
+TEST_CASE("BA with raw double[3] points (Euclidean<3>) matches Eigen points", "[solver]") {
+  BaScene a(5, 30, 41), b(5, 30, 41);
+  Problem pa, pb;
+  a.build(&pa, RobustLoss::cauchy(2.0));
+  for (const auto& o : b.obs) {
+    solver::ReprojectionResidual r;
+    r.fx = b.fx;
+    r.fy = b.fy;
+    r.cx = b.cx;
+    r.cy = b.cy;
+    r.uv = o.uv;
+    pb.add_residual_block(r, RobustLoss::cauchy(2.0), 1.0, &b.cams[o.cam],
+                          solver::euclidean<3>(b.points[o.point].data()));
+  }
+  pb.set_constant(&b.cams[0]);
+  pb.set_constant(&b.cams[1]);
+  LevenbergMarquardt lm(tight(LinearSolverType::kSchur));
+  const solver::Summary sa = lm.solve(&pa);
+  const solver::Summary sb = lm.solve(&pb);
+  INFO(sa.brief_report() << "\n" << sb.brief_report());
+  CHECK(sb.converged());
+  CHECK(sa.final_cost == Approx(sb.final_cost).epsilon(1e-12));
+  for (std::size_t j = 0; j < a.points.size(); ++j)
+    CHECK((a.points[j] - b.points[j]).norm() < 1e-9);
+}
