@@ -162,3 +162,10 @@ TEST_CASE("KITTI helpers reject non-finite or non-rotation poses", "[geo][kitti]
   require_invalid_argument([&] { geodrift::geo::kitti_point_to_world(Eigen::Vector3d(0, nan, 0)); },
                            {"p_K", "not finite"});
 }
+
+TEST_CASE("LocalFrame describes itself for file headers", "[geo][local_frame]") {
+  const LocalFrame frame = LocalFrame::from_utm(32, true, 457367.4012, 5428842.3259, 160.0);
+  CHECK(frame.description() ==
+        "W = UTM 32N grid shifted to E0 457367.401 N0 5428842.326 h0 160.000 (x east, y north, "
+        "z up ellipsoidal; metres)");
+}

@@ -169,6 +169,16 @@ class LocalFrame {
   /// The origin as latitude/longitude/height.
   const Geodetic& origin_geodetic() const { return origin_geodetic_; }
 
+  /// One-line statement of W for file headers, e.g. "W = UTM 32N grid shifted to E0 457367.401
+  /// N0 5428842.326 h0 160 (x east, y north, z up ellipsoidal; metres)". Millimetre precision.
+  std::string description() const {
+    std::ostringstream os;
+    os << std::fixed << std::setprecision(3) << "W = UTM " << zone_string()
+       << " grid shifted to E0 " << easting0_ << " N0 " << northing0_ << " h0 " << height0_
+       << " (x east, y north, z up ellipsoidal; metres)";
+    return os.str();
+  }
+
   /// Geodetic point -> W (metres), projected in W's zone even when the point's standard zone
   /// differs.
   /// @throws InvalidArgument for non-finite inputs, latitude outside [-90, 90], longitude

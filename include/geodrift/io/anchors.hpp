@@ -370,9 +370,8 @@ inline void write_anchors_csv(const std::string& path, const std::vector<Anchor>
   for (const Anchor& a : anchors) any_frame = any_frame || a.frame >= 0;
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "# geodrift " << kVersion << " anchors: WGS84 latitude/longitude (deg), ellipsoidal "
-       << "height (m), sigma_m (m), heading_deg (deg clockwise from true north); W = UTM "
-       << frame.zone_string() << " origin E0 " << detail::fmt(frame.easting0()) << " N0 "
-       << detail::fmt(frame.northing0()) << " h0 " << detail::fmt(frame.height0()) << "\n";
+       << "height (m), sigma_m (m), heading_deg (deg clockwise from true north); converted "
+       << "from " << frame.description() << "\n";
     std::string header;
     if (any_frame) header += "frame,";
     if (any_time) header += "timestamp,";

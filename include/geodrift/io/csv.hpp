@@ -98,11 +98,9 @@ inline void write_trajectory_csv(const std::string& path, const std::vector<Traj
     out.push_back(o);
   }
   detail::write_atomically(path, [&](std::ostream& os) {
-    os << "# geodrift " << kVersion << " trajectory: x,y,z camera centre in W = UTM "
-       << frame.zone_string() << " grid shifted to E0 " << detail::fmt(frame.easting0()) << " N0 "
-       << detail::fmt(frame.northing0()) << " h0 " << detail::fmt(frame.height0())
-       << " (x east, y north, z up; metres); latitude/longitude WGS84 degrees; heights "
-          "ellipsoidal metres; heading_deg clockwise from true north"
+    os << "# geodrift " << kVersion << " trajectory: x,y,z camera centre in " << frame.description()
+       << "; latitude/longitude WGS84 degrees; heights ellipsoidal metres; heading_deg "
+          "clockwise from true north"
        << (note.empty() ? "" : "; ") << note << "\n";
     const auto& cols = trajectory_csv_columns();
     for (std::size_t i = 0; i < cols.size(); ++i) os << (i ? "," : "") << cols[i];

@@ -45,9 +45,8 @@ inline void write_geojson(const std::string& path, const std::vector<Eigen::Vect
   for (const Anchor& a : anchors) anchor_g.push_back(frame.to_geodetic(a.y_w));
   const std::string frame_text =
       "WGS84 [longitude, latitude] degrees, ellipsoidal height metres; "
-      "computed from W = UTM " +
-      frame.zone_string() + " grid shifted to E0 " + detail::fmt(frame.easting0()) + " N0 " +
-      detail::fmt(frame.northing0()) + " h0 " + detail::fmt(frame.height0());
+      "computed from " +
+      frame.description();
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "{\n  \"type\": \"FeatureCollection\",\n  \"geodrift\": {\"version\": "
        << detail::json_string(kVersion) << ", \"frame\": " << detail::json_string(frame_text)

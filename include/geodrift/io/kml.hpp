@@ -46,10 +46,8 @@ inline void write_kml(const std::string& path, const std::vector<Eigen::Vector3d
   const std::string description =
       std::string("geodrift ") + kVersion +
       ". Coordinates: WGS84 longitude,latitude (degrees), ellipsoidal height (metres, shown "
-      "clamped to ground); computed from W = UTM " +
-      frame.zone_string() + " grid shifted to E0 " + detail::fmt(frame.easting0()) + " N0 " +
-      detail::fmt(frame.northing0()) + " h0 " + detail::fmt(frame.height0()) + "." +
-      (note.empty() ? "" : " ") + note;
+      "clamped to ground); computed from " +
+      frame.description() + "." + (note.empty() ? "" : " ") + note;
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
        << "<kml xmlns=\"http://www.opengis.net/kml/2.2\">\n<Document>\n"
