@@ -73,6 +73,14 @@ TEST_CASE("Umeyama reports degenerate input instead of returning garbage", "[eva
   CHECK_FALSE(a.message.empty());
   CHECK(a.s == 1.0);
   CHECK_THROWS_AS(eval::umeyama(line, two), InvalidArgument);
+  // Far from the origin (UTM-sized coordinates) with a real 1 m spread: not degenerate.
+  std::vector<Vector3d> far{
+      {5e5, 5.4e6, 100}, {5e5 + 1, 5.4e6, 100}, {5e5, 5.4e6 + 1, 100}, {5e5, 5.4e6, 101}};
+  std::vector<Vector3d> far_dst;
+  for (const auto& p : far) far_dst.push_back(p - Vector3d(5e5, 5.4e6, 0));
+  const auto af = eval::umeyama(far, far_dst);
+  REQUIRE(af.ok());
+  CHECK(af.s == Approx(1.0).epsilon(1e-9));
   line[2].x() = std::nan("");
   CHECK_THROWS_AS(eval::umeyama(line, line2), InvalidArgument);
 }

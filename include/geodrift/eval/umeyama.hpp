@@ -34,10 +34,13 @@ struct Alignment {
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const { return s * (R * p) + t; }
 };
 
-/// Relative threshold on the singular values of the centred source covariance below which the
-/// configuration counts as collinear (σ2/σ1) or coincident (σ1 relative to the squared extent
-/// of the coordinates).
-inline constexpr double kAlignmentDegeneracyRatio = 1e-10;
+/// Collinearity gate: the configuration counts as collinear when σ2/σ1 of the centred source
+/// covariance (variances, so a spread ratio of 1e-5) is below this.
+inline constexpr double kAlignmentCollinearRatio = 1e-10;
+/// Coincidence gate: the points count as coincident when the largest variance is below this
+/// times the largest squared coordinate (a spread of 1e-10 of the coordinates' magnitude, i.e.
+/// rounding level), so far-from-origin coordinates (UTM) with a real spread are not flagged.
+inline constexpr double kAlignmentCoincidentRatio = 1e-20;
 
 /// Least-squares similarity (with_scale = true, Sim(3)) or rigid (false, SE(3)) alignment
 /// minimising Σ|dst_i − (s·R·src_i + t)|², closed form of Umeyama, "Least-squares estimation of
@@ -84,13 +87,13 @@ inline Alignment umeyama(const std::vector<Eigen::Vector3d>& src,
   // Degeneracy of the source configuration: eigenvalues of its covariance.
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd_s(cov_s);
   const Eigen::Vector3d ev = svd_s.singularValues();
-  if (ev(0) <= kAlignmentDegeneracyRatio * std::max(extent, 1e-300)) {
+  if (ev(0) <= kAlignmentCoincidentRatio * extent || ev(0) <= 1e-300) {
     out.status = AlignmentStatus::kCoincident;
     out.message = "umeyama: the " + std::to_string(n) +
                   " source points coincide; scale and rotation are unobservable";
     return out;
   }
-  if (ev(1) <= kAlignmentDegeneracyRatio * ev(0)) {
+  if (ev(1) <= kAlignmentCollinearRatio * ev(0)) {
     out.status = AlignmentStatus::kCollinear;
     out.message = "umeyama: the " + std::to_string(n) +
                   " source points are collinear; the rotation about their line is unobservable";
