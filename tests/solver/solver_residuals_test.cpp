@@ -95,7 +95,7 @@ TEMPLATE_TEST_CASE("Pose prior and camera-centre prior Jacobians match central d
                      test::rounding_floor(fscale(r) + 1e4, 1e-6)));
 
     const solver::CameraCentrePriorResidual<G> cp{test::random_translation(rng)};
-    Eigen::Vector3d rc;
+    Eigen::Vector3d rc = Eigen::Vector3d::Zero();
     typename solver::CameraCentrePriorResidual<G>::Mat Jc;
     REQUIRE(cp(S, &rc, &Jc));
     const auto fc = [&](const G& X) {
@@ -124,7 +124,7 @@ TEST_CASE("Reprojection residual Jacobians match central differences", "[solver]
     res.cx = 600.0;
     res.cy = 180.0;
     res.uv = Eigen::Vector2d(px(rng), px(rng) * 0.4);
-    Eigen::Vector2d r;
+    Eigen::Vector2d r = Eigen::Vector2d::Zero();
     solver::ReprojectionResidual::MatT J_T;
     solver::ReprojectionResidual::MatX J_X;
     REQUIRE(res(T_cw, X, &r, &J_T, &J_X));
