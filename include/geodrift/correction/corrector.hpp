@@ -1,0 +1,567 @@
+#pragma once
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <set>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "geodrift/correction/init.hpp"
+#include "geodrift/correction/residuals/geo_view_centre.hpp"
+#include "geodrift/error.hpp"
+#include "geodrift/lie/se3.hpp"
+#include "geodrift/lie/sim3.hpp"
+#include "geodrift/map/map.hpp"
+#include "geodrift/solver/levenberg_marquardt.hpp"
+#include "geodrift/solver/loss.hpp"
+#include "geodrift/solver/problem.hpp"
+#include "geodrift/solver/residuals/relative_pose.hpp"
+#include "geodrift/solver/residuals/reprojection.hpp"
+
+namespace geodrift::correction {
+
+/// What the Corrector does when a correspondence arrives (DESIGN.md "Correction" step 4).
+enum class Mode {
+  kOurs,       ///< the paper: INIT, then sliding-window Sim3 PGO followed by BA
+  kInitPgo,    ///< INIT, then sliding-window PGO only
+  kInitBa,     ///< INIT, then sliding-window BA with the geo term only (Lhuillier 2012 style)
+  kInitOnly,   ///< INIT only (the paper's baseline similarity)
+  kFullBatch,  ///< INIT, then at finish() one PGO + BA over the whole path with every anchor
+};
+
+inline const char* to_string(Mode m) {
+  switch (m) {
+    case Mode::kOurs:
+      return "ours";
+    case Mode::kInitPgo:
+      return "init+pgo";
+    case Mode::kInitBa:
+      return "init+ba";
+    case Mode::kInitOnly:
+      return "init";
+    case Mode::kFullBatch:
+      return "batch";
+  }
+  return "?";
+}
+
+/// Parses "ours" | "init+pgo" | "init+ba" | "init" | "batch". @throws InvalidArgument.
+inline Mode mode_from_string(const std::string& s) {
+  for (Mode m : {Mode::kOurs, Mode::kInitPgo, Mode::kInitBa, Mode::kInitOnly, Mode::kFullBatch})
+    if (s == to_string(m)) return m;
+  GEODRIFT_CHECK(false,
+                 "unknown correction mode '" << s << "' (ours, init+pgo, init+ba, init, batch)");
+  return Mode::kOurs;
+}
+
+/// Corrector options; defaults are the paper's where it gives them (Sec. 3.5, 4.1).
+struct CorrectorOptions {
+  Mode mode = Mode::kOurs;
+  InitOptions init;
+  /// Correspondences per window: the PGO/BA window spans the keyframes of the newest
+  /// `window_correspondences` correspondences (the paper: 3).
+  int window_correspondences = 3;
+  double lambda1 = 1e5;  ///< weight of e1 (keyframe–keyframe Sim3 edges)
+  double lambda2 = 1e5;  ///< weight of e2 (keyframe–geo-view Sim3 edges)
+  double lambda3 = 1.0;  ///< weight of e3 (geo view centre − geo-tag, metres)
+  /// Covisibility threshold (shared map points) for e1 edges (DESIGN.md default 15).
+  int min_shared_points = 15;
+  /// Consecutive keyframes are always linked by an e1 edge (ORB-SLAM's spanning tree), so a
+  /// window never falls apart where covisibility is thin.
+  bool link_consecutive = true;
+  /// BA robust loss: Huber threshold in pixels (ORB-SLAM: √5.991 for monocular points).
+  double ba_huber_px = 2.447651936;
+  /// Standard deviation of the BA geo term in metres when a correspondence has none (<= 0).
+  double ba_geo_sigma_m = 1.0;
+  int pgo_max_iterations = 50;
+  int ba_max_iterations = 30;
+  int num_threads = 1;
+
+  bool validate(std::string* why) const {
+    auto fail = [&](const std::string& m) {
+      if (why) *why = m;
+      return false;
+    };
+    if (!init.validate(why)) return false;
+    if (window_correspondences < 2)
+      return fail("window_correspondences " + std::to_string(window_correspondences) +
+                  " must be >= 2");
+    for (double l : {lambda1, lambda2, lambda3})
+      if (!(std::isfinite(l) && l > 0)) return fail("PGO weights lambda1..3 must be finite, > 0");
+    if (min_shared_points < 1) return fail("min_shared_points must be >= 1");
+    if (!(ba_huber_px > 0)) return fail("ba_huber_px must be > 0");
+    if (!(ba_geo_sigma_m > 0 && std::isfinite(ba_geo_sigma_m)))
+      return fail("ba_geo_sigma_m must be finite and > 0");
+    if (pgo_max_iterations < 1 || ba_max_iterations < 1)
+      return fail("pgo/ba max iterations must be >= 1");
+    if (num_threads < 1 || num_threads > 2) return fail("num_threads must be 1 or 2");
+    return true;
+  }
+};
+
+/// What one correction step did (one per correspondence after INIT, plus INIT itself).
+struct StepReport {
+  std::string kind;  ///< "init", "pgo", "ba", "init-failed"
+  int correspondence = -1;
+  int window_first_keyframe = -1, window_last_keyframe = -1;  ///< keyframe ids
+  int nodes = 0, edges = 0;
+  double initial_cost = 0, final_cost = 0;
+  int iterations = 0;
+  std::string termination;
+  double seconds = 0;
+};
+
+/// The Corrector (DESIGN.md "who owns what"). It receives keyframes, points, observations and
+/// correspondences in the front end's map frame M (raw, never rewritten), keeps its own copy,
+/// and holds their corrected state in W:
+///   - each keyframe i: S_i ∈ Sim(3), W → camera in M units (scale s_i = local M units per
+///     metre); its metric pose in W is S_i.to_se3() = [R | t/s];
+///   - each map point: its position in W.
+/// Before INIT nothing is corrected (`initialized()` is false). A keyframe added after the
+/// last correction is placed by chaining its raw relative pose to its corrected predecessor.
+/// Synchronous: add_correspondence runs INIT / PGO / BA as the mode says and returns.
+class Corrector {
+ public:
+  explicit Corrector(CorrectorOptions options = {}) : options_(std::move(options)) {
+    std::string why;
+    GEODRIFT_CHECK(options_.validate(&why), why);
+  }
+
+  const CorrectorOptions& options() const { return options_; }
+
+  /// @throws InvalidArgument on an invalid camera or a duplicate id.
+  void add_camera(const map::Camera& camera) {
+    camera.validate();
+    GEODRIFT_CHECK(!cameras_.count(camera.id), "camera id " << camera.id << " added twice");
+    cameras_[camera.id] = camera;
+  }
+
+  /// Adds a keyframe (raw pose in M). Keyframes must arrive in time order.
+  /// @throws InvalidArgument on a duplicate id, unknown camera, non-finite pose or timestamp
+  ///         earlier than the previous keyframe's.
+  void add_keyframe(const map::Keyframe& kf) {
+    GEODRIFT_CHECK(!kf_index_.count(kf.id), "keyframe id " << kf.id << " added twice");
+    GEODRIFT_CHECK(kf.T_cw.matrix().allFinite(), "keyframe " << kf.id << " pose is not finite");
+    GEODRIFT_CHECK(std::isfinite(kf.timestamp), "keyframe " << kf.id << " timestamp not finite");
+    GEODRIFT_CHECK(cameras_.empty() || cameras_.count(kf.camera_id),
+                   "keyframe " << kf.id << " names unknown camera " << kf.camera_id);
+    if (!kfs_.empty())
+      GEODRIFT_CHECK(kf.timestamp >= kfs_.back().timestamp,
+                     "keyframe " << kf.id << " at t = " << kf.timestamp
+                                 << " s arrives after keyframe " << kfs_.back().id
+                                 << " at t = " << kfs_.back().timestamp << " s");
+    kf_index_[kf.id] = static_cast<int>(kfs_.size());
+    kfs_.push_back(kf);
+    lie::Sim3d S;
+    if (initialized_) S = chain_from_previous(static_cast<int>(kfs_.size()) - 1);
+    S_.push_back(S);
+  }
+
+  /// Adds a map point (raw position in M; its reference keyframe must exist).
+  void add_point(const map::MapPoint& p) {
+    GEODRIFT_CHECK(!pt_index_.count(p.id), "map point id " << p.id << " added twice");
+    GEODRIFT_CHECK(p.position.allFinite(), "map point " << p.id << " position is not finite");
+    GEODRIFT_CHECK(
+        kf_index_.count(p.reference_keyframe),
+        "map point " << p.id << " names unknown reference keyframe " << p.reference_keyframe);
+    pt_index_[p.id] = static_cast<int>(pts_.size());
+    pts_.push_back(p);
+    X_w_.push_back(initialized_ ? point_from_reference(static_cast<int>(pts_.size()) - 1)
+                                : Eigen::Vector3d::Zero());
+    observers_.emplace_back();
+  }
+
+  /// Adds an observation; updates covisibility incrementally.
+  void add_observation(const map::Observation& o) {
+    const auto k = kf_index_.find(o.keyframe);
+    const auto p = pt_index_.find(o.point);
+    GEODRIFT_CHECK(k != kf_index_.end(), "observation names unknown keyframe " << o.keyframe);
+    GEODRIFT_CHECK(p != pt_index_.end(), "observation names unknown point " << o.point);
+    GEODRIFT_CHECK(o.pixel.allFinite(), "observation (keyframe " << o.keyframe << ", point "
+                                                                 << o.point << ") not finite");
+    auto& obs = observers_[p->second];
+    for (const auto& [ki, oi] : obs) {
+      if (ki == k->second) return;  // a point is observed once per keyframe
+      ++shared_[{std::min(ki, k->second), std::max(ki, k->second)}];
+    }
+    obs.push_back({k->second, static_cast<int>(obs_.size())});
+    obs_.push_back(o);
+  }
+
+  /// Adds a map-to-world correspondence and runs the correction the mode asks for.
+  /// Correspondences of the same keyframe and geo-tag position (within 1 mm) are merged.
+  /// @throws InvalidArgument if its keyframe is unknown or a value is not finite.
+  void add_correspondence(const map::Correspondence& c) {
+    GEODRIFT_CHECK(kf_index_.count(c.keyframe),
+                   "correspondence " << c.id << " names unknown keyframe " << c.keyframe);
+    GEODRIFT_CHECK(c.y_w.allFinite() && c.T_vk.matrix().allFinite(),
+                   "correspondence " << c.id << " is not finite");
+    for (const auto& d : corr_)
+      if (d.keyframe == c.keyframe && (d.y_w - c.y_w).norm() < 1e-3) return;  // duplicate
+    corr_.push_back(c);
+    const int n = static_cast<int>(corr_.size());
+    if (!initialized_) {
+      if (n >= options_.init.num_correspondences) try_init();
+      return;
+    }
+    if (options_.mode == Mode::kInitOnly || options_.mode == Mode::kFullBatch) return;
+    const int first = n - options_.window_correspondences;
+    if (first < 0) return;
+    if (options_.mode != Mode::kInitBa) run_pgo(first, n - 1);
+    if (options_.mode != Mode::kInitPgo) run_ba(first, n - 1);
+  }
+
+  /// Ends the stream: in full-batch mode runs PGO and BA over the whole path with every
+  /// correspondence. Other modes have nothing left to do.
+  void finish() {
+    if (options_.mode != Mode::kFullBatch || !initialized_ || corr_.empty()) return;
+    run_pgo(0, static_cast<int>(corr_.size()) - 1, /*whole_path=*/true);
+    run_ba(0, static_cast<int>(corr_.size()) - 1, /*whole_path=*/true);
+  }
+
+  bool initialized() const { return initialized_; }
+  /// Why INIT has not succeeded yet (empty when it has, or was not tried).
+  const std::string& init_message() const { return init_message_; }
+  const InitResult& init_result() const { return init_; }
+
+  int num_keyframes() const { return static_cast<int>(kfs_.size()); }
+  int num_points() const { return static_cast<int>(pts_.size()); }
+  const std::vector<map::Keyframe>& keyframes() const { return kfs_; }
+  const std::vector<map::Correspondence>& correspondences() const { return corr_; }
+  const std::vector<map::MapPoint>& points() const { return pts_; }
+  const std::vector<StepReport>& reports() const { return reports_; }
+
+  /// Corrected pose of the i-th keyframe (insertion order): W → camera, M units.
+  /// @throws Error before INIT.
+  const lie::Sim3d& keyframe_sim3(int i) const {
+    require_init();
+    return S_.at(i);
+  }
+  /// Corrected metric pose of the i-th keyframe in W (world → camera, metres).
+  lie::SE3d keyframe_pose_w(int i) const { return keyframe_sim3(i).to_se3(); }
+  /// Corrected camera centre of the i-th keyframe in W (metres).
+  Eigen::Vector3d keyframe_center_w(int i) const {
+    return keyframe_sim3(i).inverse().translation();
+  }
+  /// Corrected position of the i-th point (insertion order) in W.
+  const Eigen::Vector3d& point_w(int i) const {
+    require_init();
+    return X_w_.at(i);
+  }
+  /// Index of keyframe `id` in insertion order, or -1.
+  int keyframe_index(int id) const {
+    const auto it = kf_index_.find(id);
+    return it == kf_index_.end() ? -1 : it->second;
+  }
+  /// Camera centre in W of correspondence j's geo view, as currently corrected.
+  Eigen::Vector3d view_center_w(int j) const {
+    const auto& c = corr_.at(j);
+    return view_sim3(c, S_[kf_index_.at(c.keyframe)]).inverse().translation();
+  }
+
+ private:
+  void require_init() const {
+    if (!initialized_) throw Error("corrector: not initialised yet (" + init_message_ + ")");
+  }
+
+  static lie::Sim3d sim3(const lie::SE3d& T) { return lie::Sim3d(T); }
+  /// The view's Sim3 pose from its keyframe's: S_v = T_vk · S_k (T_vk in M units).
+  static lie::Sim3d view_sim3(const map::Correspondence& c, const lie::Sim3d& S_k) {
+    return sim3(c.T_vk) * S_k;
+  }
+
+  lie::Sim3d chain_from_previous(int i) const {
+    // S_i = (T_i · T_{i-1}⁻¹) · S_{i-1}: the raw relative pose, at the predecessor's scale.
+    return sim3(kfs_[i].T_cw * kfs_[i - 1].T_cw.inverse()) * S_[i - 1];
+  }
+  Eigen::Vector3d point_from_reference(int p) const {
+    const int r = kf_index_.at(pts_[p].reference_keyframe);
+    return S_[r].inverse().act(kfs_[r].T_cw.act(pts_[p].position));
+  }
+
+  // ---- INIT ---------------------------------------------------------------------------------
+  void try_init() {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<Eigen::Vector3d> centres, ups, am, aw;
+    for (const auto& k : kfs_) {
+      const lie::SE3d T_wc = k.T_cw.inverse();
+      centres.push_back(T_wc.translation());
+      ups.push_back(-(T_wc.rotation().matrix().col(1)));  // camera y is down
+    }
+    for (const auto& c : corr_) {
+      const lie::SE3d T_vw = c.T_vk * kfs_[kf_index_.at(c.keyframe)].T_cw;
+      am.push_back(T_vw.inverse().translation());
+      aw.push_back(c.y_w);
+    }
+    init_ = estimate_init(centres, ups, am, aw, options_.init);
+    StepReport rep;
+    rep.correspondence = static_cast<int>(corr_.size()) - 1;
+    rep.seconds = seconds_since(t0);
+    if (!init_.ok) {
+      init_message_ = init_.message;
+      rep.kind = "init-failed";
+      rep.termination = init_.message;
+      reports_.push_back(rep);
+      return;
+    }
+    init_message_.clear();
+    initialized_ = true;
+    const lie::Sim3d S_mw = init_.S_wm.inverse();
+    for (std::size_t i = 0; i < kfs_.size(); ++i) S_[i] = sim3(kfs_[i].T_cw) * S_mw;
+    for (std::size_t p = 0; p < pts_.size(); ++p) X_w_[p] = init_.S_wm.act(pts_[p].position);
+    rep.kind = "init";
+    rep.nodes = static_cast<int>(init_.inliers.size());
+    rep.final_cost = init_.rms_m;
+    rep.termination = "rms " + std::to_string(init_.rms_m) + " m over " +
+                      std::to_string(init_.inliers.size()) + " inliers";
+    reports_.push_back(rep);
+  }
+
+  static double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  /// Keyframe index range [lo, hi] of the window spanned by correspondences [first, last].
+  std::pair<int, int> window_of(int first, int last, bool whole_path) const {
+    if (whole_path) return {0, static_cast<int>(kfs_.size()) - 1};
+    int lo = static_cast<int>(kfs_.size()), hi = -1;
+    for (int j = first; j <= last; ++j) {
+      const int k = kf_index_.at(corr_[j].keyframe);
+      lo = std::min(lo, k);
+      hi = std::max(hi, k);
+    }
+    return {lo, hi};
+  }
+
+  /// Applies new window poses: points follow their reference keyframe's correction, keyframes
+  /// after the window (and their points) follow the last window keyframe's.
+  void apply_window_update(int lo, int hi, const std::vector<lie::Sim3d>& S_new) {
+    const int n = static_cast<int>(kfs_.size());
+    std::vector<lie::Sim3d> delta(n);  // S_new⁻¹ · S_old, W → W, per moved keyframe
+    std::vector<char> moved(n, 0);
+    for (int i = lo; i <= hi; ++i) {
+      delta[i] = S_new[i - lo].inverse() * S_[i];
+      S_[i] = S_new[i - lo];
+      moved[i] = 1;
+    }
+    // Keyframes after the window keep their relative pose to the last window keyframe.
+    const lie::Sim3d last_delta = delta[hi];
+    for (int i = hi + 1; i < n; ++i) {
+      const lie::Sim3d S_old = S_[i];
+      S_[i] = S_old * last_delta.inverse();
+      delta[i] = last_delta;
+      moved[i] = 1;
+    }
+    for (std::size_t p = 0; p < pts_.size(); ++p) {
+      const int r = kf_index_.at(pts_[p].reference_keyframe);
+      if (moved[r]) X_w_[p] = delta[r].act(X_w_[p]);
+    }
+  }
+
+  // ---- PGO (paper Sec. 3.5) ----------------------------------------------------------------
+  void run_pgo(int first, int last, bool whole_path = false) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto [lo, hi] = window_of(first, last, whole_path);
+    StepReport rep;
+    rep.kind = "pgo";
+    rep.correspondence = last;
+    rep.window_first_keyframe = kfs_[lo].id;
+    rep.window_last_keyframe = kfs_[hi].id;
+
+    const int nw = hi - lo + 1;
+    std::vector<lie::Sim3d> S(S_.begin() + lo, S_.begin() + hi + 1);  // window nodes
+    std::map<int, lie::Sim3d> fixed;                                  // covisible past
+    const int nv = last - first + 1;
+    std::vector<lie::Sim3d> V(nv);  // geo view nodes
+    for (int j = 0; j < nv; ++j) {
+      const auto& c = corr_[first + j];
+      V[j] = view_sim3(c, S_[kf_index_.at(c.keyframe)]);
+    }
+    solver::Problem problem;
+    const solver::RobustLoss trivial;
+    int edges = 0;
+    auto node = [&](int i) -> lie::Sim3d* {
+      if (i >= lo && i <= hi) return &S[i - lo];
+      return &fixed.try_emplace(i, S_[i]).first->second;
+    };
+    auto add_e1 = [&](int i, int j) {
+      lie::Sim3d* Si = node(i);
+      lie::Sim3d* Sj = node(j);
+      // ΔS_ij from the poses before optimisation: e1 = 0 at the start.
+      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{*Sj * Si->inverse()},
+                                 trivial, options_.lambda1, Si, Sj);
+      ++edges;
+    };
+    std::set<std::pair<int, int>> linked;
+    for (const auto& [pair, count] : shared_) {
+      const auto [a, b] = pair;  // a < b
+      if (count < options_.min_shared_points) continue;
+      if (b < lo || a > hi || b > hi) continue;  // needs one end in the window, none after it
+      add_e1(a, b);
+      linked.insert(pair);
+    }
+    if (options_.link_consecutive) {
+      for (int i = std::max(lo, 1); i <= hi; ++i)
+        if (!linked.count({i - 1, i})) add_e1(i - 1, i);
+    }
+    for (int j = 0; j < nv; ++j) {
+      const auto& c = corr_[first + j];
+      const int k = kf_index_.at(c.keyframe);
+      // e2: keyframe -> view, with the fixed relative pose T_vk as ΔS.
+      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{sim3(c.T_vk)}, trivial,
+                                 options_.lambda2, node(k), &V[j]);
+      // e3: the view's camera centre (not its translation) minus the geo-tag.
+      problem.add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{c.y_w}, trivial,
+                                 options_.lambda3, &V[j]);
+      edges += 2;
+    }
+    for (auto& [i, Sf] : fixed) problem.set_constant(&Sf);
+
+    solver::Options lm;
+    lm.max_iterations = options_.pgo_max_iterations;
+    lm.linear_solver = solver::LinearSolverType::kCholmod;
+    lm.function_tolerance = 1e-10;
+    lm.num_threads = options_.num_threads;
+    const solver::Summary sum = solver::LevenbergMarquardt(lm).solve(&problem);
+    rep.nodes = nw + nv;
+    rep.edges = edges;
+    fill(&rep, sum);
+    if (usable(sum)) apply_window_update(lo, hi, S);
+    rep.seconds = seconds_since(t0);
+    reports_.push_back(rep);
+  }
+
+  // ---- BA with the geo term (paper Sec. 3.6) ------------------------------------------------
+  void run_ba(int first, int last, bool whole_path = false) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto [lo, hi] = window_of(first, last, whole_path);
+    StepReport rep;
+    rep.kind = "ba";
+    rep.correspondence = last;
+    rep.window_first_keyframe = kfs_[lo].id;
+    rep.window_last_keyframe = kfs_[hi].id;
+
+    const int nw = hi - lo + 1;
+    std::vector<lie::SE3d> T(nw);
+    for (int i = 0; i < nw; ++i) T[i] = S_[lo + i].to_se3();
+    std::map<int, lie::SE3d> fixed;
+    // Points seen by window keyframes (C5), optimised in W.
+    std::vector<int> pts;
+    std::vector<char> take(pts_.size(), 0);
+    for (std::size_t p = 0; p < pts_.size(); ++p)
+      for (const auto& [k, o] : observers_[p])
+        if (k >= lo && k <= hi) {
+          take[p] = 1;
+          break;
+        }
+    for (std::size_t p = 0; p < pts_.size(); ++p)
+      if (take[p]) pts.push_back(static_cast<int>(p));
+    std::vector<Eigen::Vector3d> X(pts.size());
+    for (std::size_t q = 0; q < pts.size(); ++q) X[q] = X_w_[pts[q]];
+
+    solver::Problem problem;
+    const solver::RobustLoss huber = solver::RobustLoss::huber(options_.ba_huber_px);
+    auto pose = [&](int k) -> lie::SE3d* {
+      if (k >= lo && k <= hi) return &T[k - lo];
+      return &fixed.try_emplace(k, S_[k].to_se3()).first->second;
+    };
+    int edges = 0;
+    for (std::size_t q = 0; q < pts.size(); ++q) {
+      for (const auto& [k, oi] : observers_[pts[q]]) {
+        if (k > hi && !whole_path) continue;  // keyframes after the window are not corrected yet
+        const map::Observation& o = obs_[oi];
+        const map::Camera& cam = camera_of(k);
+        solver::ReprojectionResidual r{cam.fx, cam.fy, cam.cx, cam.cy, o.pixel};
+        Eigen::Matrix<double, 2, 1> e;
+        const bool in_window = k >= lo && k <= hi;
+        if (!r(in_window ? T[k - lo] : S_[k].to_se3(), X[q], &e))
+          continue;  // behind the camera now: not a usable observation
+        problem.add_residual_block(r, huber, 1.0, pose(k), &X[q]);
+        ++edges;
+      }
+    }
+    for (int j = first; j <= last; ++j) {
+      const auto& c = corr_[j];
+      const int k = kf_index_.at(c.keyframe);
+      if (k < lo || k > hi || !problem.has_parameter(&T[k - lo])) continue;
+      // The keyframe→view offset in metres at the keyframe's current scale.
+      const double s_k = S_[k].scale();
+      const Eigen::Vector3d c_vk = c.T_vk.inverse().translation() / s_k;
+      const double sigma = c.sigma_m > 0 ? c.sigma_m : options_.ba_geo_sigma_m;
+      problem.add_residual_block(GeoViewCentreResidual{c_vk, c.y_w}, solver::RobustLoss(),
+                                 1.0 / (sigma * sigma), &T[k - lo]);
+      ++edges;
+    }
+    for (auto& [k, Tf] : fixed) problem.set_constant(&Tf);
+    rep.nodes = nw + static_cast<int>(pts.size());
+    rep.edges = edges;
+    if (edges == 0) {
+      rep.termination = "no observations in the window";
+      rep.seconds = seconds_since(t0);
+      reports_.push_back(rep);
+      return;
+    }
+    solver::Options lm;
+    lm.max_iterations = options_.ba_max_iterations;
+    lm.linear_solver = solver::LinearSolverType::kSchur;
+    lm.num_threads = options_.num_threads;
+    const solver::Summary sum = solver::LevenbergMarquardt(lm).solve(&problem);
+    fill(&rep, sum);
+    if (usable(sum)) {
+      std::vector<lie::Sim3d> S_new(nw);
+      for (int i = 0; i < nw; ++i) {
+        // Back to Sim3 at the keyframe's scale: [s·R | s·t].
+        const double s = S_[lo + i].scale();
+        S_new[i] = lie::Sim3d(T[i].rotation(), s * T[i].translation(), s);
+      }
+      // Points of the window were optimised directly: overwrite what the update rule moved.
+      apply_window_update(lo, hi, S_new);
+      for (std::size_t q = 0; q < pts.size(); ++q) X_w_[pts[q]] = X[q];
+    }
+    rep.seconds = seconds_since(t0);
+    reports_.push_back(rep);
+  }
+
+  const map::Camera& camera_of(int k) const {
+    const auto it = cameras_.find(kfs_[k].camera_id);
+    if (it == cameras_.end())
+      throw Error("corrector: BA needs the camera of keyframe " + std::to_string(kfs_[k].id));
+    return it->second;
+  }
+
+  static bool usable(const solver::Summary& s) {
+    return s.converged() || s.termination == solver::Termination::kMaxIterations ||
+           s.termination == solver::Termination::kNoDecrease;
+  }
+  static void fill(StepReport* rep, const solver::Summary& s) {
+    rep->initial_cost = s.initial_cost;
+    rep->final_cost = s.final_cost;
+    rep->iterations = s.iterations;
+    rep->termination = solver::to_string(s.termination);
+    if (!s.message.empty()) rep->termination += ": " + s.message;
+  }
+
+  CorrectorOptions options_;
+  std::unordered_map<int, map::Camera> cameras_;
+  std::vector<map::Keyframe> kfs_;
+  std::unordered_map<int, int> kf_index_;
+  std::vector<lie::Sim3d> S_;  ///< corrected keyframe poses (valid after INIT)
+  std::vector<map::MapPoint> pts_;
+  std::unordered_map<int, int> pt_index_;
+  std::vector<Eigen::Vector3d> X_w_;                         ///< corrected points (after INIT)
+  std::vector<std::vector<std::pair<int, int>>> observers_;  ///< point -> (kf index, obs index)
+  std::vector<map::Observation> obs_;
+  std::map<std::pair<int, int>, int> shared_;  ///< (kf index a < b) -> shared points
+  std::vector<map::Correspondence> corr_;
+  bool initialized_ = false;
+  InitResult init_;
+  std::string init_message_;
+  std::vector<StepReport> reports_;
+};
+
+}  // namespace geodrift::correction
