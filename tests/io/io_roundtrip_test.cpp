@@ -2,9 +2,10 @@
 
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <random>
-#include <regex>
 #include <set>
 #include <string>
 #include <vector>
@@ -37,12 +38,23 @@ constexpr double kPi = 3.14159265358979323846;
 
 const std::string kVersionTag = std::string("geodrift ") + geodrift::kVersion;
 
-// All numbers in a string, in order.
+// All numbers in a string, in order (a hand scanner: GCC 12's std::regex trips
+// -Wmaybe-uninitialized under the sanitizer build).
 std::vector<double> numbers_in(const std::string& s) {
-  static const std::regex re(R"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)");
   std::vector<double> out;
-  for (auto it = std::sregex_iterator(s.begin(), s.end(), re); it != std::sregex_iterator(); ++it)
-    out.push_back(std::stod(it->str()));
+  const char* p = s.c_str();
+  while (*p) {
+    const bool starts =
+        std::isdigit(static_cast<unsigned char>(*p)) ||
+        ((*p == '-' || *p == '+' || *p == '.') && std::isdigit(static_cast<unsigned char>(p[1])));
+    if (!starts) {
+      ++p;
+      continue;
+    }
+    char* end = nullptr;
+    out.push_back(std::strtod(p, &end));
+    p = end;
+  }
   return out;
 }
 
