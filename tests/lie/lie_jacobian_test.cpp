@@ -5,17 +5,18 @@
 // (test::rounding_floor), so 1e4 m translations are not mistaken for errors while a wrong or
 // dropped term (≥ 1e-3 relative) is caught.
 
-#include <Eigen/Core>
-#include <algorithm>
-#include <catch2/catch.hpp>
-#include <cmath>
-#include <random>
-
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/sim3.hpp"
 #include "geodrift/lie/so3.hpp"
 #include "support/numeric_jacobian.hpp"
 #include "support/samples.hpp"
+
+#include <Eigen/Core>
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
 
 namespace lie = geodrift::lie;
 namespace test = geodrift::test;

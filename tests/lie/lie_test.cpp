@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <complex>
 #include <limits>
 #include <random>
 #include <sstream>
@@ -316,5 +317,75 @@ TEST_CASE("Lie groups work in float and cast between scalar types", "[lie]") {
                      1e-4f * J.cwiseAbs().maxCoeff()));
     const lie::SO3f Rf = lie::SO3f::exp(Eigen::Vector3f(0.1f, -0.2f, 0.3f));
     CHECK(Rf.log().isApprox(Eigen::Vector3f(0.1f, -0.2f, 0.3f), 1e-5f));
+  }
+}
+
+TEST_CASE("Taylor branches agree with the closed forms evaluated in long double", "[lie][taylor]") {
+  // The branch coefficients are far too small to move a Jacobian beyond rounding near θ = 0, so
+  // a wrong Taylor term would slip through the central-difference tests; compare them here with
+  // the exact closed forms, in long double where their cancellation is still harmless.
+  using LD = long double;
+  namespace detail = geodrift::lie::detail;
+  const auto rel = [](double a, LD b) {
+    return static_cast<double>(std::abs((static_cast<LD>(a) - b) / b));
+  };
+  // SE3 / SO3 coefficients below kSmallAngle = 1e-2, against their defining series summed
+  // generically in long double to convergence (the closed forms cancel too much there even in
+  // long double): c1 = Σ(−1)^m θ^{2m}/(2m+2)!, c2 = Σ(−1)^m θ^{2m}/(2m+3)!, c·t = (dc/dθ)/θ.
+  for (double th : {1e-3, 4e-3, 9.99e-3}) {
+    const LD t = th;
+    LD c1 = 0, c2 = 0, c1t = 0, c2t = 0, p = 1;  // p = (−1)^m θ^{2m}
+    LD f2 = 2, f3 = 6;                           // (2m+2)!, (2m+3)!
+    for (int m = 0; m < 12; ++m) {
+      c1 += p / f2;
+      c2 += p / f3;
+      if (m >= 1) {
+        c1t += 2 * m * p / (t * t) / f2;
+        c2t += 2 * m * p / (t * t) / f3;
+      }
+      p *= -t * t;
+      f2 *= (2 * m + 3) * (2 * m + 4);
+      f3 *= (2 * m + 4) * (2 * m + 5);
+    }
+    const detail::VCoeffs<double> k = detail::se3_coeffs<double>(th, true);
+    INFO("theta " << th);
+    CHECK(rel(k.c1, c1) < 1e-15);
+    CHECK(rel(k.c2, c2) < 1e-15);
+    CHECK(rel(k.c1t, c1t) < 1e-15);
+    CHECK(rel(k.c2t, c2t) < 1e-15);
+    const Eigen::Vector3d w = th * Eigen::Vector3d(0.6, 0.0, 0.8);
+    const Eigen::Matrix3d W = lie::skew<double>(w);
+    const LD d2 = (1 - (t / 2) * std::cos(t / 2) / std::sin(t / 2)) / (t * t);
+    const Eigen::Matrix3d Jli =
+        Eigen::Matrix3d::Identity() - 0.5 * W + static_cast<double>(d2) * W * W;
+    CHECK(test::near(SO3d::left_jacobian_inverse(w), Jli, 1e-15));
+    const LD half = std::sin(t / 2) / t;
+    const Eigen::Quaterniond q = lie::detail::quaternion_exp<double>(w);
+    CHECK(rel(q.w(), std::cos(t / 2)) < 1e-15);
+    CHECK(rel(q.x(), half * static_cast<LD>(w.x())) < 1e-15);
+  }
+  // Sim3 coefficients: series branch (θ < 0.5) against the complex closed forms.
+  for (double th : {0.05, 0.2, 0.49}) {
+    for (double sg : {-6.0, -1.0, 0.0, 0.7, 3.9, 4.1}) {
+      using C = std::complex<LD>;
+      const LD t = th, sigma = sg;
+      const C z(sigma, t), ez = std::exp(z);
+      const C phi = (ez - LD(1)) / z, dphi = (ez * (z - LD(1)) + LD(1)) / (z * z);
+      const LD g0 = sg == 0.0 ? LD(1) : std::expm1(sigma) / sigma;
+      const LD g1 = sg == 0.0 ? LD(0.5) : (std::exp(sigma) * (sigma - 1) + 1) / (sigma * sigma);
+      const LD c1 = phi.imag() / t, c2 = (g0 - phi.real()) / (t * t);
+      const LD c1s = dphi.imag() / t, c2s = (g1 - dphi.real()) / (t * t);
+      const LD c1t = (dphi.real() - c1) / (t * t), c2t = (c1s - 2 * c2) / (t * t);
+      const detail::VCoeffs<double> k = detail::sim3_coeffs<double>(th, sg, true);
+      INFO("theta " << th << " sigma " << sg);
+      CHECK(rel(k.c0, g0) < 1e-14);
+      CHECK(rel(k.c0s, g1) < 1e-13);
+      CHECK(rel(k.c1, c1) < 1e-13);
+      CHECK(rel(k.c2, c2) < 1e-12);
+      CHECK(rel(k.c1s, c1s) < 1e-12);
+      CHECK(rel(k.c2s, c2s) < 1e-12);
+      CHECK(rel(k.c1t, c1t) < 1e-10);
+      CHECK(rel(k.c2t, c2t) < 1e-9);
+    }
   }
 }

@@ -8,6 +8,7 @@
 /// operator*), so every helper can use it for its own residuals.
 
 #include <Eigen/Core>
+
 #include <algorithm>
 #include <cmath>
 #include <iostream>

@@ -6,14 +6,15 @@
 /// (identity, |ξ| ≈ 1e-9, angle 1e-8, σ = 0 / ±1e-9 with large θ, θ = 0 with large σ,
 /// θ = π − 1e-3 and π − 1e-6). Generic over the group type through its kDoF (3, 6, 7).
 
-#include <Eigen/Core>
-#include <cmath>
-#include <random>
-#include <vector>
-
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/sim3.hpp"
 #include "geodrift/lie/so3.hpp"
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <random>
+#include <vector>
 
 namespace geodrift::test {
 

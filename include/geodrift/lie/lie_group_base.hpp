@@ -6,6 +6,7 @@
 /// Perturbations are on the LEFT, X ← exp(δ)·X (DESIGN.md).
 
 #include <Eigen/Core>
+
 #include <ostream>
 
 namespace geodrift::lie {

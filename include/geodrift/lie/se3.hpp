@@ -5,12 +5,12 @@
 /// Tangent ξ = (ω, ν) ∈ R⁶ (DESIGN.md order: rotation first). All Jacobians are w.r.t. LEFT
 /// perturbations T ← exp(δ)·T.
 
-#include <Eigen/Core>
-
 #include "geodrift/error.hpp"
 #include "geodrift/lie/detail/so3_details.hpp"
 #include "geodrift/lie/lie_group_base.hpp"
 #include "geodrift/lie/so3.hpp"
+
+#include <Eigen/Core>
 
 namespace geodrift::lie {
 

@@ -6,16 +6,17 @@
 /// w.r.t. LEFT perturbations S ← exp(δ)·S. The left Jacobian and its inverse are exact (no
 /// first-order shortcut): see detail/sim3_details.hpp for the derivation.
 
-#include <Eigen/Core>
-#include <Eigen/LU>
-#include <cmath>
-
 #include "geodrift/error.hpp"
 #include "geodrift/lie/detail/sim3_details.hpp"
 #include "geodrift/lie/detail/so3_details.hpp"
 #include "geodrift/lie/lie_group_base.hpp"
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/so3.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+
+#include <cmath>
 
 namespace geodrift::lie {
 

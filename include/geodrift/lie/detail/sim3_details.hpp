@@ -23,12 +23,12 @@
 ///   (2m−2) θ^{2m−4} g_{2m}/(2m)!
 /// and g_k(σ) itself has a power series for small |σ| (covering σ → 0 and θ, σ → 0 together).
 
+#include "geodrift/lie/constants.hpp"
+#include "geodrift/lie/detail/so3_details.hpp"
+
 #include <cmath>
 #include <complex>
 #include <limits>
-
-#include "geodrift/lie/constants.hpp"
-#include "geodrift/lie/detail/so3_details.hpp"
 
 namespace geodrift::lie::detail {
 
