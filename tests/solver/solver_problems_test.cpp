@@ -349,3 +349,44 @@ TEST_CASE("BA with raw double[3] points (Euclidean<3>) matches Eigen points", "[
   for (std::size_t j = 0; j < a.points.size(); ++j)
     CHECK((a.points[j] - b.points[j]).norm() < 1e-9);
 }
+
+TEST_CASE("Two evaluation threads give the same solves as one", "[solver]") {
+  // Sim3 pose graph (CHOLMOD) and BA (Schur), 1 vs 2 threads: same path to rounding.
+  PoseGraph<lie::Sim3d> g1(50, 0.01, 13), g2(50, 0.01, 13);
+  Problem p1, p2;
+  g1.build(&p1);
+  g2.build(&p2);
+  Options o1 = tight(LinearSolverType::kCholmod), o2 = o1;
+  o2.num_threads = 2;
+  LevenbergMarquardt lm1(o1), lm2(o2);
+  const solver::Summary s1 = lm1.solve(&p1), s2 = lm2.solve(&p2);
+  INFO(s1.brief_report() << "\n" << s2.brief_report());
+  CHECK(p2.num_threads() == 2);
+  CHECK(s2.converged());
+  CHECK(s1.initial_cost == Approx(s2.initial_cost).epsilon(1e-13));
+  CHECK(s1.final_cost == Approx(s2.final_cost).epsilon(1e-10));
+  CHECK(max_pose_error(g1.poses, g2.poses) < 1e-8);
+
+  BaScene a(6, 60, 51), b(6, 60, 51);
+  Problem pa, pb;
+  a.build(&pa, RobustLoss::huber(1.0));
+  b.build(&pb, RobustLoss::huber(1.0));
+  Options oa = tight(LinearSolverType::kSchur), ob = oa;
+  ob.num_threads = 2;
+  LevenbergMarquardt lma(oa), lmb(ob);
+  const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+  CHECK(sb.converged());
+  CHECK(sa.final_cost == Approx(sb.final_cost).epsilon(1e-10));
+  for (std::size_t j = 0; j < a.points.size(); ++j)
+    CHECK((a.points[j] - b.points[j]).norm() < 1e-8 * (1.0 + a.points[j].norm()));
+
+  // An unevaluable residual is reported with two threads too (it sits in the second half).
+  Problem pc;
+  BaScene c(6, 60, 51);
+  c.build(&pc, RobustLoss());
+  c.points.back() = Eigen::Vector3d(0.0, 0.0, -100.0);  // behind every camera
+  LevenbergMarquardt lmc(ob);
+  const solver::Summary sc = lmc.solve(&pc);
+  CHECK(sc.termination == Termination::kNonFiniteResidual);
+  CHECK_THAT(sc.message, Catch::Contains("residual block"));
+}

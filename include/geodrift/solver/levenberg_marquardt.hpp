@@ -218,6 +218,7 @@ class LevenbergMarquardt {
 
     const bool schur = options_.linear_solver == LinearSolverType::kSchur ||
                        options_.linear_solver == LinearSolverType::kSchurDense;
+    problem->set_num_threads(options_.num_threads);
     if (!problem->is_finalized() || problem->has_schur_ordering() != schur)
       problem->finalize(schur);
     const BlockStructure& s = problem->structure();

@@ -29,11 +29,15 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <type_traits>
 #include <typeindex>
@@ -138,6 +142,64 @@ class ParameterGroup final : public ParameterGroupBase {
   std::vector<typename M::Storage> backup_;
 };
 
+/// One persistent background thread for the 2-thread evaluation (no thread creation or
+/// allocation per iteration). run() hands it a function pointer + context; wait() joins.
+class Worker {
+ public:
+  Worker() : thread_([this] { loop(); }) {}
+  ~Worker() {
+    {
+      std::lock_guard<std::mutex> lk(m_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  Worker(const Worker&) = delete;
+  Worker& operator=(const Worker&) = delete;
+
+  void run(void (*fn)(void*), void* ctx) {
+    {
+      std::lock_guard<std::mutex> lk(m_);
+      fn_ = fn;
+      ctx_ = ctx;
+      pending_ = true;
+    }
+    cv_.notify_all();
+  }
+  void wait() {
+    std::unique_lock<std::mutex> lk(m_);
+    done_cv_.wait(lk, [this] { return !pending_; });
+  }
+
+ private:
+  void loop() {
+    std::unique_lock<std::mutex> lk(m_);
+    while (true) {
+      cv_.wait(lk, [this] { return pending_ || stop_; });
+      if (pending_) {
+        void (*fn)(void*) = fn_;
+        void* ctx = ctx_;
+        lk.unlock();
+        fn(ctx);
+        lk.lock();
+        pending_ = false;
+        done_cv_.notify_all();
+      } else if (stop_) {
+        return;
+      }
+    }
+  }
+
+  std::mutex m_;
+  std::condition_variable cv_, done_cv_;
+  void (*fn_)(void*) = nullptr;
+  void* ctx_ = nullptr;
+  bool pending_ = false;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
 /// Type-erased container of residual blocks of one type (one virtual call per container).
 class ResidualContainerBase {
  public:
@@ -152,9 +214,16 @@ class ResidualContainerBase {
   virtual void finalize(const std::vector<ParameterBlock>& blocks, const BlockStructure& s) = 0;
   /// Cost-only evaluation of blocks [begin, end); false + *failed = k on the first failure.
   virtual bool cost(int begin, int end, double* cost, int* failed) const = 0;
-  /// Evaluates and accumulates blocks [begin, end) into H, g.
-  virtual bool linearize(int begin, int end, double* H, double* g, double* cost, int* failed,
-                         LinearizeTimes* times) = 0;
+  /// Evaluates and accumulates the blocks listed in idx[0..count) into H, g. Thread-safe for
+  /// disjoint lists whose H/g entries do not overlap (scratch is on the caller's stack).
+  virtual bool linearize(const int* idx, int count, double* H, double* g, double* cost, int* failed,
+                         LinearizeTimes* times) const = 0;
+  /// Smallest and largest H block index of residual k's free parameters (-1, -1 if none).
+  virtual void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo,
+                           int* hi) const = 0;
+  /// Per-thread work lists (Problem::finalize): [0] thread 0, [1] thread 1, [2] shared (run
+  /// after both, on the calling thread). With one thread, [0] holds every block.
+  std::vector<int> part[3];
   /// Writes the weighted, corrected residual and Jacobian rows of block k (tests).
   virtual bool jacobian(int k, int row, std::vector<Eigen::Triplet<double>>* triplets,
                         Eigen::VectorXd* residuals, double* cost) const = 0;
@@ -169,7 +238,11 @@ class ResidualContainer final : public ResidualContainerBase {
   using Residual = typename Block::Residual;
   using Jacobians = typename Block::Jacobians;
   using SqrtInfo = typename Block::SqrtInformation;
-  static constexpr int kChunk = 32;
+  /// Residuals evaluated before their batch is accumulated (scratch ≤ ~24 KiB on the stack).
+  static constexpr int kChunk = static_cast<int>(std::clamp<std::size_t>(
+      24576 / (sizeof(typename ResidualBlock<Functor, Params...>::Residual) +
+               sizeof(typename ResidualBlock<Functor, Params...>::Jacobians)),
+      1, 32));
 
   std::vector<Block> blocks;
   std::vector<SqrtInfo> sqrt_infos;
@@ -220,29 +293,41 @@ class ResidualContainer final : public ResidualContainerBase {
     return true;
   }
 
-  bool linearize(int begin, int end, double* H, double* g, double* cost, int* failed,
-                 LinearizeTimes* times) override {
+  bool linearize(const int* idx, int count, double* H, double* g, double* cost, int* failed,
+                 LinearizeTimes* times) const override {
     using Clock = std::chrono::steady_clock;
+    Residual r[kChunk];
+    Jacobians J[kChunk];
     double c = 0.0;
-    for (int k0 = begin; k0 < end; k0 += kChunk) {
-      const int k1 = std::min(end, k0 + kChunk);
+    for (int k0 = 0; k0 < count; k0 += kChunk) {
+      const int k1 = std::min(count, k0 + kChunk);
       const auto t0 = Clock::now();
       for (int k = k0; k < k1; ++k) {
         double ck;
-        if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r_[k - k0], &J_[k - k0])) {
-          *failed = k;
+        if (!blocks[idx[k]].evaluate(sqrt_infos.data(), &ck, &r[k - k0], &J[k - k0])) {
+          *failed = idx[k];
           return false;
         }
         c += ck;
       }
       const auto t1 = Clock::now();
-      for (int k = k0; k < k1; ++k) blocks[k].accumulate(r_[k - k0], J_[k - k0], H, g);
+      for (int k = k0; k < k1; ++k) blocks[idx[k]].accumulate(r[k - k0], J[k - k0], H, g);
       const auto t2 = Clock::now();
       times->evaluate += std::chrono::duration<double>(t1 - t0).count();
       times->assemble += std::chrono::duration<double>(t2 - t1).count();
     }
     *cost += c;
     return true;
+  }
+
+  void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo, int* hi) const override {
+    *lo = *hi = -1;
+    for (int id : param_ids[k]) {
+      const int b = pbs[id].index;
+      if (b < 0) continue;
+      if (*lo < 0 || b < *lo) *lo = b;
+      if (b > *hi) *hi = b;
+    }
   }
 
   bool jacobian(int k, int row, std::vector<Eigen::Triplet<double>>* triplets,
@@ -275,10 +360,6 @@ class ResidualContainer final : public ResidualContainerBase {
     });
     return ok;
   }
-
- private:
-  std::array<Residual, kChunk> r_;
-  std::array<Jacobians, kChunk> J_;
 };
 
 }  // namespace detail
@@ -407,6 +488,7 @@ class Problem {
     structure_ = std::make_unique<BlockStructure>();
     structure_->build(sizes, std::move(couplings), num_elim);
     for (auto& c : containers_) c->finalize(params_, *structure_);
+    partition();
     row_.assign(order_.size() + 1, 0);
     for (std::size_t i = 0; i < order_.size(); ++i)
       row_[i + 1] = row_[i] + containers_[order_[i].first]->num_residuals();
@@ -414,6 +496,19 @@ class Problem {
     schur_ordering_ = schur_ordering;
     ++generation_;
   }
+
+  /// Threads used by linearize() and evaluate_cost(): 1 or 2. With 2, residual blocks whose
+  /// H blocks all lie in the first (second) half of the block columns run on the calling
+  /// (background) thread; the few that straddle the split run afterwards on the calling thread.
+  /// @throws InvalidArgument unless n is 1 or 2.
+  void set_num_threads(int n) {
+    GEODRIFT_CHECK(n == 1 || n == 2, "num_threads " << n << " not 1 or 2");
+    if (n == num_threads_) return;
+    num_threads_ = n;
+    worker_ = n == 2 ? std::make_unique<detail::Worker>() : nullptr;
+    if (finalized_) partition();
+  }
+  int num_threads() const { return num_threads_; }
 
   bool is_finalized() const { return finalized_; }
   bool has_schur_ordering() const { return schur_ordering_; }
@@ -439,6 +534,43 @@ class Problem {
   /// Cost ½Σρ(|W·r|²) at the current states. @return false (and *error) if a block fails.
   bool evaluate_cost(double* cost, EvaluationError* error = nullptr) const {
     *cost = 0.0;
+    if (num_threads_ == 2 && worker_) {
+      struct Ctx {
+        const Problem* p;
+        double cost = 0.0;
+        int container = -1, failed = -1;
+      } ctx{this};
+      worker_->run(
+          [](void* v) {
+            Ctx& c = *static_cast<Ctx*>(v);
+            for (std::size_t i = 0; i < c.p->containers_.size(); ++i) {
+              const auto& cont = *c.p->containers_[i];
+              const int n = cont.size();
+              if (!cont.cost(n / 2, n, &c.cost, &c.failed)) {
+                c.container = static_cast<int>(i);
+                return;
+              }
+            }
+          },
+          &ctx);
+      bool ok = true;
+      for (const auto& c : containers_) {
+        int failed = -1;
+        if (!c->cost(0, c->size() / 2, cost, &failed)) {
+          set_error(*c, failed, "returned false or a non-finite residual", error);
+          ok = false;
+          break;
+        }
+      }
+      worker_->wait();
+      if (ok && ctx.container >= 0) {
+        set_error(*containers_[ctx.container], ctx.failed,
+                  "returned false or a non-finite residual", error);
+        ok = false;
+      }
+      *cost += ctx.cost;
+      return ok;
+    }
     for (const auto& c : containers_) {
       int failed = -1;
       if (!c->cost(0, c->size(), cost, &failed)) {
@@ -452,20 +584,68 @@ class Problem {
   /// Evaluates residuals and Jacobians at the current states and writes H = J̃ᵀJ̃ (values on
   /// structure()) and g = J̃ᵀr̃ (J̃, r̃: weighted, Triggs-corrected). H and g are overwritten.
   /// @param g num_effective_parameters() doubles.
+  /// @param times accumulates the calling thread's evaluation and assembly time.
   bool linearize(BlockSparseMatrix* H, double* g, double* cost, LinearizeTimes* times,
-                 EvaluationError* error = nullptr) {
+                 EvaluationError* error = nullptr) const {
     GEODRIFT_CHECK(finalized_, "Problem::linearize() before finalize()");
     H->set_zero();
     std::fill(g, g + structure_->num_cols(), 0.0);
     *cost = 0.0;
-    for (auto& c : containers_) {
+    struct Ctx {
+      const Problem* p;
+      double* H;
+      double* g;
+      double cost = 0.0;
+      int container = -1, failed = -1;
+      LinearizeTimes times;
+    } ctx{this, H->values(), g, 0.0, -1, -1, LinearizeTimes{}};
+    const bool two = num_threads_ == 2 && worker_;
+    if (two) {
+      worker_->run(
+          [](void* v) {
+            Ctx& c = *static_cast<Ctx*>(v);
+            for (std::size_t i = 0; i < c.p->containers_.size(); ++i) {
+              const auto& cont = *c.p->containers_[i];
+              const auto& l = cont.part[1];
+              if (!cont.linearize(l.data(), static_cast<int>(l.size()), c.H, c.g, &c.cost,
+                                  &c.failed, &c.times)) {
+                c.container = static_cast<int>(i);
+                return;
+              }
+            }
+          },
+          &ctx);
+    }
+    bool ok = true;
+    for (const auto& c : containers_) {
+      const auto& l = c->part[0];
       int failed = -1;
-      if (!c->linearize(0, c->size(), H->values(), g, cost, &failed, times)) {
+      if (!c->linearize(l.data(), static_cast<int>(l.size()), H->values(), g, cost, &failed,
+                        times)) {
         set_error(*c, failed, "returned false or a non-finite residual", error);
-        return false;
+        ok = false;
+        break;
       }
     }
-    return true;
+    if (two) worker_->wait();
+    if (ok && ctx.container >= 0) {
+      set_error(*containers_[ctx.container], ctx.failed, "returned false or a non-finite residual",
+                error);
+      ok = false;
+    }
+    // Blocks straddling the split, after both threads are done.
+    for (const auto& c : containers_) {
+      if (!ok) break;
+      const auto& l = c->part[2];
+      int failed = -1;
+      if (!c->linearize(l.data(), static_cast<int>(l.size()), H->values(), g, cost, &failed,
+                        times)) {
+        set_error(*c, failed, "returned false or a non-finite residual", error);
+        ok = false;
+      }
+    }
+    *cost += ctx.cost;
+    return ok;
   }
 
   /// Finds the first residual block with a non-finite Jacobian (diagnostics, slow).
@@ -563,6 +743,40 @@ class Problem {
     return it->second;
   }
 
+  /// Work lists per thread (see set_num_threads): split at the block column m where half of
+  /// the residual blocks have all their H blocks left of m.
+  void partition() {
+    std::vector<int> his;
+    int lo, hi;
+    if (num_threads_ == 2) {
+      for (const auto& c : containers_)
+        for (int k = 0; k < c->size(); ++k) {
+          c->block_range(k, params_, &lo, &hi);
+          his.push_back(hi);
+        }
+    }
+    int m = 0;
+    if (!his.empty()) {
+      std::nth_element(his.begin(), his.begin() + his.size() / 2, his.end());
+      m = his[his.size() / 2];
+    }
+    for (auto& c : containers_) {
+      for (auto& l : c->part) l.clear();
+      for (int k = 0; k < c->size(); ++k) {
+        if (num_threads_ != 2) {
+          c->part[0].push_back(k);
+          continue;
+        }
+        c->block_range(k, params_, &lo, &hi);
+        if (hi < 0) {  // all parameters constant: cost only, no H or g entries
+          c->part[0].push_back(k);
+          continue;
+        }
+        c->part[hi < m ? 0 : lo >= m ? 1 : 2].push_back(k);
+      }
+    }
+  }
+
   static void set_error(const detail::ResidualContainerBase& c, int k, const char* what,
                         EvaluationError* error) {
     if (!error) return;
@@ -584,6 +798,8 @@ class Problem {
   bool finalized_ = false;
   bool schur_ordering_ = false;
   std::uint64_t generation_ = 0;
+  int num_threads_ = 1;
+  std::unique_ptr<detail::Worker> worker_;
 };
 
 }  // namespace geodrift::solver
