@@ -81,6 +81,17 @@ struct NanInside {
   }
 };
 
+/// Rosenbrock with a deliberately wrong ∂r0/∂x (for Options::check_jacobians).
+struct WrongRosenbrock {
+  static constexpr int kNumResiduals = 2;
+  bool operator()(const Eigen::Vector2d& p, Eigen::Vector2d* r,
+                  Eigen::Matrix2d* J = nullptr) const {
+    Rosenbrock{}(p, r, J);
+    if (J) (*J)(0, 0) *= 1.01;
+    return true;
+  }
+};
+
 /// Tiny local test manifold: planar rotation angle group (kDoF = 1), left retraction.
 struct Rot2 {
   static constexpr int kDoF = 1;
@@ -463,4 +474,20 @@ TEST_CASE("CHOLMOD and dense solvers agree; not positive definite is a status", 
   // And recover on the next values.
   H.values()[s.diagonal_positions()[4]] = 1e3;
   CHECK(chol.factorize(H) == solver::LinearSolverStatus::kSuccess);
+}
+
+TEST_CASE("Options::check_jacobians catches a wrong analytic Jacobian", "[solver][jacobian]") {
+  Eigen::Vector2d good(-1.2, 1.0), bad(0.5, 0.3);
+  Problem p;
+  p.add_residual_block(Rosenbrock{}, RobustLoss(), 1.0, &good);
+  Options o;
+  o.check_jacobians = true;
+  LevenbergMarquardt lm(o);
+  CHECK(lm.solve(&p).converged());
+  p.add_residual_block(WrongRosenbrock{}, RobustLoss::huber(1.0), 1.0, &bad);
+  const Eigen::Vector2d before = bad;
+  const solver::Summary s = lm.solve(&p);
+  CHECK(s.termination == Termination::kJacobianCheckFailed);
+  CHECK_THAT(s.message, Catch::Contains("residual block 1"));
+  CHECK(bad == before);  // states restored after the numeric differences
 }

@@ -76,6 +76,11 @@ struct Options {
   int num_threads = 1;
   /// Print one line per iteration to stdout.
   bool verbose = false;
+  /// Debug: before iterating, compare every residual block's analytic Jacobians (functor
+  /// output) with central differences (step 1e-6, left retraction); stop with
+  /// kJacobianCheckFailed if any element differs by more than jacobian_check_tolerance·(1+|J|).
+  bool check_jacobians = false;
+  double jacobian_check_tolerance = 1e-5;
 
   /// @return true if the options are usable; otherwise false and *why names the member.
   bool validate(std::string* why) const {
@@ -116,6 +121,7 @@ enum class Termination {
   kNonFiniteJacobian,    ///< a Jacobian is NaN / inf at an accepted point
   kInvalidOptions,       ///< Options::validate failed; nothing was done
   kInvalidProblem,       ///< empty problem or a structure the linear solver cannot handle
+  kJacobianCheckFailed,  ///< Options::check_jacobians found a wrong analytic Jacobian
 };
 
 inline const char* to_string(Termination t) {
@@ -142,6 +148,8 @@ inline const char* to_string(Termination t) {
       return "invalid options";
     case Termination::kInvalidProblem:
       return "invalid problem";
+    case Termination::kJacobianCheckFailed:
+      return "Jacobian check failed";
   }
   return "?";
 }
@@ -255,6 +263,10 @@ class LevenbergMarquardt {
 
     LinearizeTimes lt;
     EvaluationError err;
+    if (options_.check_jacobians &&
+        !problem->check_jacobians(options_.jacobian_check_tolerance, 1e-6, &err)) {
+      return finish(Termination::kJacobianCheckFailed, err.what);
+    }
     double cost = 0.0;
     bool ok = problem->linearize(&H_, g_.data(), &cost, &lt, &err);
     sum.time_evaluate += lt.evaluate;

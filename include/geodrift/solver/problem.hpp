@@ -33,6 +33,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -229,6 +230,10 @@ class ResidualContainerBase {
                         Eigen::VectorXd* residuals, double* cost) const = 0;
   /// Whether the Jacobian of block k is finite (slow; diagnostics only).
   virtual bool jacobian_finite(int k) const = 0;
+  /// Compares block k's analytic Jacobians (functor output, before weight and loss) with
+  /// central differences (step h, left retraction of each free parameter, states restored):
+  /// returns the worst elementwise |J − J_num| / (1 + |J_num|), or +inf if unevaluable.
+  virtual double jacobian_error(int k, double h) const = 0;
 };
 
 template <typename Functor, typename... Params>
@@ -359,6 +364,54 @@ class ResidualContainer final : public ResidualContainerBase {
       if (blocks[k].col_[i] >= 0) ok = ok && std::get<i>(J).allFinite();
     });
     return ok;
+  }
+
+  double jacobian_error(int k, double h) const override {
+    const Block& b = blocks[k];
+    Residual r0, rp, rm;
+    Jacobians J;
+    double worst = 0.0;
+    const auto call = [&](Residual* r, Jacobians* jac) {
+      return call_functor(b, r, jac, std::index_sequence_for<Params...>{});
+    };
+    if (!call(&r0, &J)) return std::numeric_limits<double>::infinity();
+    bool ok = true;
+    detail::static_for<sizeof...(Params)>([&](auto i) {
+      constexpr std::size_t I = decltype(i)::value;
+      using M = Manifold<typename Block::template Param<I>>;
+      if (!ok || b.col_[I] < 0) return;
+      auto* state = std::get<I>(b.states());
+      typename M::Storage saved;
+      M::save(state, &saved);
+      for (int c = 0; c < M::kDoF; ++c) {
+        typename M::Tangent d = M::Tangent::Zero();
+        d[c] = h;
+        M::plus_in_place(state, d.data());
+        const bool okp = call(&rp, nullptr);
+        M::restore(saved, state);
+        d[c] = -h;
+        M::plus_in_place(state, d.data());
+        const bool okm = call(&rm, nullptr);
+        M::restore(saved, state);
+        if (!okp || !okm) {
+          ok = false;
+          return;
+        }
+        const Residual num = (rp - rm) / (2.0 * h);
+        const auto col = std::get<I>(J).col(c);
+        for (int row = 0; row < Block::kNumResiduals; ++row)
+          worst = std::max(worst, std::abs(col[row] - num[row]) / (1.0 + std::abs(num[row])));
+      }
+    });
+    return ok ? worst : std::numeric_limits<double>::infinity();
+  }
+
+ private:
+  template <std::size_t... I>
+  static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
+    return b.functor()(
+        Manifold<typename Block::template Param<I>>::view(std::get<I>(b.states()))..., r,
+        (jac && b.col_[I] >= 0 ? &std::get<I>(*jac) : nullptr)...);
   }
 };
 
@@ -656,6 +709,31 @@ class Problem {
           set_error(*c, k, "has a non-finite Jacobian", error);
           return true;
         }
+    return false;
+  }
+
+  /// Checks every residual block's analytic Jacobians against central differences (step h,
+  /// left retraction) at the current states; states are left unchanged.
+  /// @return true if all agree within tol (elementwise |J − J_num| ≤ tol·(1 + |J_num|));
+  ///         otherwise false and *error names the worst block and its error.
+  bool check_jacobians(double tol, double h, EvaluationError* error) const {
+    double worst = 0.0;
+    int worst_c = -1, worst_k = -1;
+    for (std::size_t ci = 0; ci < containers_.size(); ++ci) {
+      const auto& c = *containers_[ci];
+      for (int k = 0; k < c.size(); ++k) {
+        const double e = c.jacobian_error(k, h);
+        if (!(e <= worst)) {
+          worst = e;
+          worst_c = static_cast<int>(ci);
+          worst_k = k;
+        }
+      }
+    }
+    if (worst <= tol) return true;
+    std::ostringstream os;
+    os << "has an analytic Jacobian off by " << worst << " (relative) from central differences";
+    set_error(*containers_[worst_c], worst_k, os.str().c_str(), error);
     return false;
   }
 
