@@ -6,9 +6,10 @@
 ///
 /// @code
 ///   solver::Problem problem;
-///   problem.add_residual_block(RelativePoseResidual<lie::SE3d>{Z_ij}, RobustLoss(),
-///                              information_6x6, &T[i], &T[j]);   // states: lie::SE3d T[n]
-///   problem.set_constant(&T[0]);                                  // fix the gauge
+///   // states: std::vector<lie::Sim3d> S (world→camera); dS_ij frozen from the start poses
+///   problem.add_residual_block(RelativePoseResidual<lie::Sim3d>{dS_ij}, RobustLoss(),
+///                              1e5 /* information λ */, &S[i], &S[j]);
+///   problem.set_constant(&S[0]);                                  // fix the gauge
 ///   solver::LevenbergMarquardt lm(options);
 ///   const solver::Summary summary = lm.solve(&problem);           // finalizes if needed
 /// @endcode
