@@ -2,6 +2,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -9,8 +10,10 @@
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/geo/kitti.hpp"
 #include "geodrift/map/map.hpp"
+#include "geodrift/sim/detail/pnp.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
+#include "io/io_test_util.hpp"  // TempDir, write_text (belongs in tests/support/)
 
 using namespace geodrift;
 
@@ -44,7 +47,125 @@ double rms(const std::vector<double>& v) {
   return std::sqrt(s / static_cast<double>(v.size()));
 }
 
+/// ½ Σ |π(T·X_i) − u_i|².
+double reprojection_cost(const lie::SE3d& T, const std::vector<Eigen::Vector3d>& X,
+                         const std::vector<Eigen::Vector2d>& u, const map::Camera& cam) {
+  double c = 0.0;
+  for (std::size_t i = 0; i < X.size(); ++i)
+    c += 0.5 * (cam.project(T.act(X[i])) - u[i]).squaredNorm();
+  return c;
+}
+
 }  // namespace
+
+TEST_CASE("PnP refinement on the core solver recovers the pose and minimises the pixel error",
+          "[sim]") {
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  map::Camera cam;
+  cam.fx = cam.fy = 718.856;
+  cam.cx = 607.1928;
+  cam.cy = 185.2157;
+  const lie::SE3d T_true =
+      lie::SE3d::exp((lie::SE3d::Tangent() << 0.1, -0.3, 0.05, 2.0, -0.5, 10.0).finished());
+  std::vector<Eigen::Vector3d> X;
+  std::vector<Eigen::Vector2d> u, u_noisy;
+  for (int i = 0; i < 80; ++i) {
+    const Eigen::Vector3d p(12.0 * uni(rng), 4.0 * uni(rng), 17.5 + 12.5 * uni(rng));
+    X.push_back(T_true.inverse().act(p));
+    u.push_back(cam.project(p));
+    u_noisy.push_back(u.back() + Eigen::Vector2d(n01(rng), n01(rng)));
+  }
+  const lie::SE3d T_init =
+      lie::SE3d::exp((lie::SE3d::Tangent() << 0.03, -0.02, 0.04, 0.3, 0.2, -0.4).finished()) *
+      T_true;
+
+  // Exact pixels: the true pose, to machine precision.
+  const sim::detail::PnpResult exact = sim::detail::refine_pose_lm(X, u, cam, T_init, 50);
+  CHECK(exact.converged);
+  CHECK(exact.iterations >= 2);
+  CHECK((exact.T_cw * T_true.inverse()).log().norm() < 1e-9);
+  CHECK(exact.rms_px < 1e-7);
+
+  // 1 px noise: a minimum of the cost (no small left perturbation lowers it) with the RMS of
+  // 2-D noise of 1 px per axis (√2 · √((2n − 6) / 2n) ≈ 1.4 px).
+  const sim::detail::PnpResult noisy = sim::detail::refine_pose_lm(X, u_noisy, cam, T_init, 50);
+  CHECK(noisy.converged);
+  const double c0 = reprojection_cost(noisy.T_cw, X, u_noisy, cam);
+  CHECK(noisy.rms_px == Approx(std::sqrt(2.0 * c0 / X.size())).epsilon(1e-9));
+  CHECK(noisy.rms_px > 1.1);
+  CHECK(noisy.rms_px < 1.7);
+  for (int j = 0; j < 6; ++j)
+    for (double e : {-1e-4, 1e-4}) {
+      const lie::SE3d Tp = lie::SE3d::exp(e * lie::SE3d::Tangent::Unit(j)) * noisy.T_cw;
+      CHECK(reprojection_cost(Tp, X, u_noisy, cam) > c0);
+    }
+  CHECK((noisy.T_cw * T_true.inverse()).log().norm() < 0.05);
+
+  // A point behind the camera at the start: nothing solved.
+  std::vector<Eigen::Vector3d> Xb = X;
+  Xb[7] = T_init.inverse().act(Eigen::Vector3d(0.0, 0.0, -5.0));
+  const sim::detail::PnpResult behind = sim::detail::refine_pose_lm(Xb, u, cam, T_init, 50);
+  CHECK_FALSE(behind.converged);
+  CHECK(behind.T_cw.is_approx(T_init, 0.0));
+  CHECK(std::isnan(behind.rms_px));
+  CHECK_THROWS_AS(sim::detail::refine_pose_lm(X, std::vector<Eigen::Vector2d>(3), cam, T_init),
+                  InvalidArgument);
+}
+
+TEST_CASE("KITTI loader: io's pose reader, times file or nominal 10 Hz, P0/P1 calibration",
+          "[sim]") {
+  const test::TempDir dir;
+  const auto write = [&](const std::string& name, const std::string& text) {
+    const std::string f = dir.file(name);
+    test::write_text(f, text);
+    return f;
+  };
+  const std::string calib =
+      write("calib.txt",
+            "P0: 700 0 600 0 0 710 180 0 0 0 1 0\nP1: 700 0 600 -378 0 710 180 0 0 0 1 0\n"
+            "P2: 1 2 3\n");
+  // cam0 -> world: identity, then 1 m forward, then turned 90 degrees about y.
+  const std::string poses12 =
+      write("poses.txt",
+            "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 1\n\n0 0 1 0.5 0 1 0 0 -1 0 0 2\n");
+  const std::string times = write("times.txt", "0.0\n0.1036\n0.2074\n");
+  const sim::KittiSequence s = sim::load_kitti_sequence(poses12, calib, times, "xx");
+  REQUIRE(s.num_frames() == 3);
+  CHECK(s.name == "xx");
+  CHECK(s.timestamps == std::vector<double>{0.0, 0.1036, 0.2074});
+  CHECK((s.T_K_c[1].translation() - Eigen::Vector3d(0, 0, 1)).norm() < 1e-12);
+  CHECK((s.T_K_c[2].translation() - Eigen::Vector3d(0.5, 0, 2)).norm() < 1e-12);
+  CHECK((s.T_K_c[2].linear() * Eigen::Vector3d::UnitZ() - Eigen::Vector3d(1, 0, 0)).norm() < 1e-12);
+  CHECK(s.camera.fx == 700.0);
+  CHECK(s.camera.fy == 710.0);
+  CHECK(s.camera.cx == 600.0);
+  CHECK(s.camera.cy == 180.0);
+  CHECK(s.baseline_m == Approx(0.54));
+
+  // A time column: its times; an integer frame index column: nominal 0.1 s per indexed frame.
+  const std::string with_times =
+      write("pt.txt", "0 1 0 0 0 0 1 0 0 0 0 1 0\n0.25 1 0 0 0 0 1 0 0 0 0 1 1\n");
+  CHECK(sim::load_kitti_sequence(with_times, calib).timestamps == std::vector<double>{0.0, 0.25});
+  const std::string with_index =
+      write("pi.txt", "0 1 0 0 0 0 1 0 0 0 0 1 0\n4 1 0 0 0 0 1 0 0 0 0 1 1\n");
+  const sim::KittiSequence si = sim::load_kitti_sequence(with_index, calib);
+  CHECK(si.timestamps == std::vector<double>{0.0, 0.4});
+  CHECK(si.T_K_c[1].translation().z() == 1.0);
+
+  // Malformed input names the file.
+  CHECK_THROWS_AS(sim::load_kitti_sequence(poses12, calib, write("t2.txt", "0\n0.1\n")),
+                  InvalidArgument);
+  CHECK_THROWS_AS(sim::load_kitti_sequence(write("bad.txt", "1 0 0 0 0 1 0 0 0 0 1\n"), calib),
+                  InvalidArgument);
+  CHECK_THROWS_AS(sim::load_kitti_sequence(write("rot.txt", "2 0 0 0 0 1 0 0 0 0 1 0\n"), calib),
+                  InvalidArgument);
+  CHECK_THROWS_AS(
+      sim::load_kitti_sequence(poses12, write("c1.txt", "P0: 700 0 600 0 0 710 180 0 0 0 1 0\n")),
+      InvalidArgument);
+  CHECK_THROWS_AS(sim::load_kitti_sequence(poses12, calib, dir.file("none.txt")), Error);
+}
 
 TEST_CASE("KITTI anchor schedule: INIT frames, then every N from 200 + N, duplicates merged",
           "[sim]") {

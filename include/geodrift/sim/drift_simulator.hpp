@@ -757,9 +757,6 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
     }
     // Initial guess: the keyframe's drifted pose (what a PnP on its matches starts near).
     const map::Keyframe& kf = sim.map.keyframes[K];
-    Eigen::Isometry3d Tk_cw = Eigen::Isometry3d::Identity();
-    Tk_cw.linear() = kf.T_cw.rotation().matrix();
-    Tk_cw.translation() = kf.T_cw.translation();
     // PnP + LM with inlier selection (what RANSAC + LM does in the real pipeline): solve on the
     // current inliers, keep the points whose reprojection error is below the chi-square(2 dof,
     // 95 %) gate for the pixel noise (floor 1 px) or below 3x the median error, whichever is
@@ -768,11 +765,11 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
     const double gate = 2.45 * std::max(opt.pixel_noise_px, 1.0);
     std::vector<Eigen::Vector3d> Xi = X;
     std::vector<Eigen::Vector2d> ui = u;
-    detail::PnpResult pnp = detail::refine_pose_lm(Xi, ui, cam, Tk_cw, 50);
+    detail::PnpResult pnp = detail::refine_pose_lm(Xi, ui, cam, kf.T_cw, 50);
     for (int round = 0; round < 5; ++round) {
       std::vector<double> r(X.size());
       for (std::size_t i = 0; i < X.size(); ++i) {
-        const Eigen::Vector3d p = pnp.T_cw * X[i];
+        const Eigen::Vector3d p = pnp.T_cw.act(X[i]);
         r[i] = p.z() > 0 ? (cam.project(p) - u[i]).norm() : std::numeric_limits<double>::max();
       }
       std::vector<double> sorted = r;
@@ -799,15 +796,14 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
       views.push_back(v);
       continue;
     }
-    const Eigen::Isometry3d T_vk = pnp.T_cw * Tk_cw.inverse();
-    v.T_vw = detail::to_se3(pnp.T_cw);
+    v.T_vw = pnp.T_cw;
     const Eigen::Vector3d c_solved = pnp.T_cw.inverse().translation();
     const Similarity& S = sim.warp[K];
     v.position_error_m = (c_solved - S.apply(T_K_r.translation())).norm() / S.s;
     map::Correspondence& c = v.correspondence;
     c.id = next_id++;
     c.keyframe = kf.id;
-    c.T_vk = detail::to_se3(T_vk);
+    c.T_vk = pnp.T_cw * kf.T_cw.inverse();
     c.y_w = v.center_true_w + opt.geotag_noise_m * Eigen::Vector3d(n01(rng), n01(rng), n01(rng));
     c.sigma_m = opt.geotag_noise_m > 0 ? opt.geotag_noise_m : 0.05;
     c.geotag_id = f;

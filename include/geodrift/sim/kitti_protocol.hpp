@@ -8,7 +8,6 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -20,6 +19,7 @@
 #include <vector>
 
 #include "geodrift/error.hpp"
+#include "geodrift/io/trajectory.hpp"
 #include "geodrift/map/camera.hpp"
 
 namespace geodrift::sim {
@@ -56,49 +56,28 @@ inline std::vector<double> parse_numbers(const std::string& line, const std::str
 }  // namespace detail
 
 /// Reads a KITTI sequence.
-/// @param poses_path KITTI poses file, 12 numbers per line (row-major [R|t] of cam0 -> KITTI
-///        world), or 13 with the frame time first (the egusa "poses_with_times" layout).
+/// @param poses_path KITTI poses file, read by io::read_trajectory (kKitti): 12 numbers per line
+///        (row-major [R|t] of cam0 -> KITTI world), or 13 with the frame time first (the egusa
+///        "poses_with_times" layout) or an integer frame index first.
 /// @param calib_path KITTI calib.txt (lines "P0: ..." and "P1: ..."; 12 numbers each).
 /// @param times_path KITTI times.txt (one time per line); optional when the poses carry times;
-///        without either, timestamps are frame · 0.1 s (KITTI's nominal 10 Hz).
+///        without either, timestamps are frame · 0.1 s (KITTI's nominal 10 Hz; frame = the
+///        leading frame index when the poses carry one, else the line order).
 /// @throws Error if a file cannot be opened; InvalidArgument (with path:line) on malformed
-///        content, a non-rotation block, or mismatched counts.
+///        content, a non-rotation block, times or frame indices that do not increase, or
+///        mismatched counts.
 inline KittiSequence load_kitti_sequence(const std::string& poses_path,
                                          const std::string& calib_path,
                                          const std::string& times_path = "",
                                          const std::string& name = "") {
   KittiSequence seq;
   seq.name = name;
-  {
-    std::ifstream in(poses_path);
-    if (!in) throw Error("cannot open KITTI poses file " + poses_path);
-    std::string line;
-    int line_no = 0;
-    while (std::getline(in, line)) {
-      ++line_no;
-      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-      const std::vector<double> v = detail::parse_numbers(line, poses_path, line_no);
-      GEODRIFT_CHECK(v.size() == 12 || v.size() == 13,
-                     poses_path << ":" << line_no << ": " << v.size()
-                                << " numbers, expected 12 (pose) or 13 (time + pose)");
-      const std::size_t o = v.size() - 12;
-      Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 4; ++c) T.matrix()(r, c) = v[o + 4 * r + c];
-      const Eigen::Matrix3d R = T.linear();
-      const double orth = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-      GEODRIFT_CHECK(orth < 1e-4 && R.determinant() > 0,
-                     poses_path << ":" << line_no << ": rotation block is not a rotation (|RᵀR−I|"
-                                << " = " << orth << ")");
-      // Re-orthonormalise the 7-digit rotation so later inversions are exact.
-      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      T.linear() = svd.matrixU() * svd.matrixV().transpose();
-      seq.T_K_c.push_back(T);
-      if (o == 1) seq.timestamps.push_back(v[0]);
-    }
-    GEODRIFT_CHECK(!seq.T_K_c.empty(), poses_path << ": no poses");
-    GEODRIFT_CHECK(seq.timestamps.empty() || seq.timestamps.size() == seq.T_K_c.size(),
-                   poses_path << ": some lines have a time column and some do not");
+  // Poses (and the time column, when present) through the project's one KITTI reader; it
+  // re-orthonormalises the 7-digit rotations, so later inversions are exact.
+  const io::Trajectory traj = io::read_trajectory(poses_path, io::TrajectoryFormat::kKitti);
+  for (const io::TrajectoryPose& p : traj.poses) {
+    seq.T_K_c.emplace_back(p.T_cw.inverse().matrix());
+    if (traj.has_timestamps) seq.timestamps.push_back(p.timestamp);
   }
   if (!times_path.empty()) {
     std::ifstream in(times_path);
@@ -119,7 +98,7 @@ inline KittiSequence load_kitti_sequence(const std::string& poses_path,
                               << " poses");
   }
   if (seq.timestamps.empty())
-    for (int i = 0; i < seq.num_frames(); ++i) seq.timestamps.push_back(0.1 * i);
+    for (const io::TrajectoryPose& p : traj.poses) seq.timestamps.push_back(0.1 * p.frame);
 
   std::ifstream in(calib_path);
   if (!in) throw Error("cannot open KITTI calibration file " + calib_path);
