@@ -1,20 +1,50 @@
 // geodrift command line: dispatches to the subcommands. Library code throws geodrift::Error;
 // this is the one place that turns an exception into a message and a non-zero exit.
-#include <geodrift/error.hpp>
-#include <geodrift/version.hpp>
-
 #include <cstdio>
 #include <exception>
+#include <geodrift/error.hpp>
+#include <geodrift/version.hpp>
 #include <string>
 
+#include "cli_util.hpp"
+#include "commands.hpp"
+
+// cmd_experiment.cpp is written separately; the dispatch table names it once it exists.
+#if __has_include("cmd_experiment.cpp")
+#define GEODRIFT_CLI_HAS_EXPERIMENT 1
+#else
+#define GEODRIFT_CLI_HAS_EXPERIMENT 0
+#endif
+
 namespace {
+
+struct Subcommand {
+  const char* name;
+  int (*run)(int, char**);
+  const char* summary;
+};
+
+// The one dispatch table.
+const Subcommand kSubcommands[] = {
+    {"correct", geodrift::cli::run_correct,
+     "geo-localize a SLAM trajectory (+ optional COLMAP map) with an anchors CSV"},
+    {"eval", geodrift::cli::run_eval, "compare a corrected trajectory with ground truth"},
+    {"simulate", geodrift::cli::run_simulate,
+     "simulate monocular SLAM output (drifted trajectory, map, anchors) on KITTI"},
+#if GEODRIFT_CLI_HAS_EXPERIMENT
+    {"experiment", geodrift::cli::run_experiment, "regenerate the paper's KITTI experiment"},
+#endif
+};
+
 void print_usage(std::FILE* f) {
   std::fprintf(f,
                "geodrift %s: geo-localize a monocular reconstruction with sparse geo-tagged "
                "images\n\nusage: geodrift <subcommand> [options]\n       geodrift --version\n\n"
                "subcommands (geodrift <subcommand> --help for each):\n",
                geodrift::kVersion);
+  for (const Subcommand& s : kSubcommands) std::fprintf(f, "  %-11s %s\n", s.name, s.summary);
 }
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -32,8 +62,13 @@ int main(int argc, char** argv) {
       print_usage(stdout);
       return 0;
     }
+    for (const Subcommand& s : kSubcommands)
+      if (cmd == s.name) return s.run(argc - 1, argv + 1);
     std::fprintf(stderr, "geodrift: unknown subcommand '%s'\n", cmd.c_str());
     print_usage(stderr);
+    return 2;
+  } catch (const geodrift::cli::UsageError& e) {
+    std::fprintf(stderr, "geodrift %s: usage error: %s\n", cmd.c_str(), e.what());
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "geodrift %s: error: %s\n", cmd.c_str(), e.what());

@@ -1,0 +1,205 @@
+#pragma once
+/// @file
+/// Helpers shared by the subcommands: option parsing, the staged output directory (no partial
+/// outputs), progress on a TTY, and small formatting helpers.
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <geodrift/error.hpp>
+#include <map>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace geodrift::cli {
+
+/// A usage error (unknown option, missing value, bad syntax): exit code 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Command-line options of one subcommand: "--name value", "--name=value" or a flag "--name".
+class Args {
+ public:
+  /// @param valued options that take a value; @param flags options that do not.
+  /// @throws UsageError for an unknown option, a missing value, a positional argument or an
+  ///         option given twice.
+  Args(int argc, char** argv, const std::set<std::string>& valued,
+       const std::set<std::string>& flags) {
+    for (int i = 1; i < argc; ++i) {
+      std::string a = argv[i];
+      if (a.rfind("--", 0) != 0 || a.size() < 3) {
+        if (a == "-h") {
+          flags_.insert("help");
+          continue;
+        }
+        throw UsageError("unexpected argument '" + a + "' (options start with --)");
+      }
+      std::string key = a.substr(2), value;
+      bool has_value = false;
+      const auto eq = key.find('=');
+      if (eq != std::string::npos) {
+        value = key.substr(eq + 1);
+        key = key.substr(0, eq);
+        has_value = true;
+      }
+      if (flags.count(key)) {
+        if (has_value) throw UsageError("option --" + key + " takes no value");
+        flags_.insert(key);
+      } else if (valued.count(key)) {
+        if (!has_value) {
+          if (i + 1 >= argc) throw UsageError("option --" + key + " needs a value");
+          value = argv[++i];
+        }
+        if (values_.count(key)) throw UsageError("option --" + key + " given twice");
+        values_[key] = value;
+      } else {
+        throw UsageError("unknown option '--" + key + "' (see --help)");
+      }
+    }
+  }
+  bool flag(const std::string& k) const { return flags_.count(k) != 0; }
+  bool has(const std::string& k) const { return values_.count(k) != 0; }
+  std::string get(const std::string& k, const std::string& def = "") const {
+    const auto it = values_.find(k);
+    return it == values_.end() ? def : it->second;
+  }
+  /// @throws UsageError when the option is absent.
+  std::string required(const std::string& k) const {
+    if (!has(k)) throw UsageError("missing required option --" + k + " (see --help)");
+    return get(k);
+  }
+  /// Integer value. @throws UsageError when it is not an integer.
+  long long get_int(const std::string& k, long long def) const {
+    if (!has(k)) return def;
+    const std::string v = get(k);
+    std::size_t pos = 0;
+    long long x = 0;
+    try {
+      x = std::stoll(v, &pos);
+    } catch (const std::exception&) {
+      pos = 0;
+    }
+    if (pos == 0 || pos != v.size())
+      throw UsageError("option --" + k + ": '" + v + "' is not an integer");
+    return x;
+  }
+
+ private:
+  std::map<std::string, std::string> values_;
+  std::set<std::string> flags_;
+};
+
+/// Splits "a,b,c" into finite numbers. @throws UsageError naming the option.
+inline std::vector<double> parse_number_list(const std::string& option, const std::string& text,
+                                             char sep = ',') {
+  std::vector<double> out;
+  std::stringstream ss(text);
+  std::string tok;
+  while (std::getline(ss, tok, sep)) {
+    char* end = nullptr;
+    const double v = std::strtod(tok.c_str(), &end);
+    if (tok.empty() || end != tok.c_str() + tok.size() || !std::isfinite(v))
+      throw UsageError("option --" + option + ": '" + tok + "' in '" + text +
+                       "' is not a finite number");
+    out.push_back(v);
+  }
+  return out;
+}
+
+/// True when stderr is a terminal (progress is shown only then).
+inline bool stderr_is_tty() { return ::isatty(::fileno(stderr)) != 0; }
+
+/// The output directory of a subcommand, staged: everything is written into a temporary
+/// directory beside --out (same parent, so the final rename is atomic) and moved into place by
+/// commit(). Without commit() (an error), the temporary directory is removed and --out is left
+/// exactly as it was. --out that is an existing file is an error; an existing non-empty
+/// directory is refused unless `force` (then files of the same name in it are replaced, others
+/// are kept).
+class StagedOutput {
+ public:
+  /// Checks --out and creates the staging directory.
+  /// @throws Error naming the problem.
+  StagedOutput(const std::string& out, bool force) : out_(out) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (out.empty()) throw Error("--out is empty");
+    fs::path p(out);
+    if (p.filename().empty()) p = p.parent_path();  // "dir/" -> "dir"
+    out_ = p;
+    if (fs::exists(p, ec)) {
+      if (!fs::is_directory(p, ec))
+        throw Error("--out '" + out +
+                    "' exists and is not a directory (refusing to replace a file)");
+      existed_ = true;
+      if (!fs::is_empty(p, ec) && !force)
+        throw Error("--out '" + out +
+                    "' exists and is not empty (refusing to overwrite; use --force to replace "
+                    "the files geodrift writes there)");
+    }
+    const fs::path parent = p.has_parent_path() ? p.parent_path() : fs::path(".");
+    if (!fs::is_directory(parent, ec))
+      throw Error("--out '" + out + "': parent directory '" + parent.string() + "' does not exist");
+    for (int k = 0; k < 1000; ++k) {
+      fs::path t = parent / ("." + p.filename().string() + ".geodrift-tmp-" +
+                             std::to_string(::getpid()) + "-" + std::to_string(k));
+      if (fs::create_directory(t, ec)) {
+        stage_ = t;
+        return;
+      }
+    }
+    throw Error("cannot create a temporary directory in '" + parent.string() + "'");
+  }
+  StagedOutput(const StagedOutput&) = delete;
+  StagedOutput& operator=(const StagedOutput&) = delete;
+  ~StagedOutput() {
+    if (!committed_ && !stage_.empty()) {
+      std::error_code ec;
+      std::filesystem::remove_all(stage_, ec);  // our own temporary directory only
+    }
+  }
+  /// Path of `name` inside the staging directory.
+  std::string path(const std::string& name) const { return (stage_ / name).string(); }
+  std::string staging_dir() const { return stage_.string(); }
+  /// Moves the outputs into --out. @throws Error on failure (staging is then removed).
+  void commit() {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (!existed_) {
+      fs::rename(stage_, out_, ec);
+      if (ec) throw Error("cannot move outputs to '" + out_.string() + "': " + ec.message());
+    } else {
+      for (const auto& e : fs::directory_iterator(stage_)) {
+        const fs::path dst = out_ / e.path().filename();
+        if (fs::is_directory(dst, ec) && e.is_directory()) fs::remove_all(dst, ec);
+        fs::rename(e.path(), dst, ec);
+        if (ec)
+          throw Error("cannot move '" + e.path().string() + "' to '" + dst.string() +
+                      "': " + ec.message());
+      }
+      fs::remove(stage_, ec);
+    }
+    committed_ = true;
+  }
+  const std::filesystem::path& out() const { return out_; }
+
+ private:
+  std::filesystem::path out_, stage_;
+  bool existed_ = false;
+  bool committed_ = false;
+};
+
+/// The command line as one string (for report.json).
+inline std::string command_line(int argc, char** argv) {
+  std::string s = "geodrift";
+  for (int i = 0; i < argc; ++i) s += std::string(" ") + argv[i];
+  return s;
+}
+
+}  // namespace geodrift::cli

@@ -1,0 +1,442 @@
+// geodrift correct: geo-localize a SLAM trajectory (and optionally its COLMAP map) with an
+// anchors CSV, through the same streaming Corrector the live pipeline uses (DESIGN.md "The
+// Corrector: who owns what", "Command line and files").
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <geodrift/correction/corrector.hpp>
+#include <geodrift/correction/replay.hpp>
+#include <geodrift/error.hpp>
+#include <geodrift/geo/local_frame.hpp>
+#include <geodrift/io/anchors.hpp>
+#include <geodrift/io/colmap_text.hpp>
+#include <geodrift/io/csv.hpp>
+#include <geodrift/io/geojson.hpp>
+#include <geodrift/io/kml.hpp>
+#include <geodrift/io/ply.hpp>
+#include <geodrift/io/svg.hpp>
+#include <geodrift/io/trajectory.hpp>
+#include <geodrift/version.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cli_util.hpp"
+#include "commands.hpp"
+
+namespace geodrift::cli {
+namespace {
+
+const char* kCorrectHelp =
+    R"(usage: geodrift correct --trajectory FILE --anchors FILE --out DIR [options]
+
+Geo-localizes a monocular SLAM/SfM result: INIT (similarity from the first 4 anchors), then
+sliding-window Sim(3) pose-graph optimisation and bundle adjustment at each further anchor.
+
+inputs
+  --trajectory FILE   camera trajectory in the map frame M: KITTI (12 fields, or 13 with a
+                      leading frame index or time) or TUM (timestamp tx ty tz qx qy qz qw)
+  --format F          auto (default; by field count) | kitti | tum
+  --times FILE        one timestamp per pose (seconds; KITTI times.txt), optional
+  --map DIR           COLMAP text model (cameras.txt, images.txt, points3D.txt) in the same M:
+                      its images are the keyframes (matched to trajectory poses by the frame
+                      number or timestamp in the image name); without --map the correction is
+                      trajectory-only (pose graph over links to the next few keyframes)
+  --anchors FILE      anchors CSV: header row; frame and/or timestamp; latitude,longitude,height
+                      | easting,northing,zone,height | x,y,z (W, needs --origin); optional
+                      sigma_m, heading_deg. At least 4 anchors, inside the trajectory's range.
+
+options
+  --mode M            ours (default: INIT + PGO + BA) | init+pgo | init+ba | init | batch
+  --origin LAT,LON,H  origin of W (degrees, degrees, ellipsoidal metres); default: first anchor
+  --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
+                      always one); the others are carried along by their raw relative pose
+  --links N           without --map: link each keyframe to its N predecessors (default 5)
+  --out DIR           output directory (created; must not exist or be empty unless --force)
+  --force             write into an existing non-empty --out (replaces geodrift's own files)
+  --help              this text
+
+outputs in DIR (every file states frame, units and the geodrift version)
+  trajectory.csv      every input pose: frame, timestamp, kind (keyframe|interpolated), x,y,z in
+                      W, UTM, latitude/longitude/height, heading_deg, after_last_anchor
+  trajectory_kitti.txt, trajectory_tum.txt   corrected path in W (camera-to-world, for evo)
+  track.geojson, track.kml                   path + anchors (WGS84)
+  points.ply          corrected map points in W (with --map)
+  topview.svg         corrected path and anchors, top view
+  scale.svg           local scale of the corrected keyframes (no ground truth here)
+  report.json         version, command line, parameters, INIT result, per-step timings
+)";
+
+/// Raw pose at `fraction` between two poses: centre linear, rotation along the geodesic.
+lie::SE3d interpolate(const lie::SE3d& a_cw, const lie::SE3d& b_cw, double fraction) {
+  if (fraction <= 0) return a_cw;
+  const lie::SE3d a = a_cw.inverse(), b = b_cw.inverse();
+  const lie::SO3d dR = a.rotation().inverse() * b.rotation();
+  const lie::SO3d R = a.rotation() * lie::SO3d::exp(fraction * dR.log());
+  const Eigen::Vector3d c = (1 - fraction) * a.translation() + fraction * b.translation();
+  return lie::SE3d(R, c).inverse();
+}
+
+/// Reads a times file (one number per non-comment line) for `n` poses.
+std::vector<double> read_times(const std::string& path, std::size_t n) {
+  io::detail::LineReader reader(path);
+  std::vector<double> t;
+  std::string raw;
+  while (reader.next(&raw)) {
+    const std::string s = io::detail::trim(raw);
+    if (s.empty() || s[0] == '#') continue;
+    const auto f = io::detail::split_ws(s);
+    if (f.size() != 1)
+      io::detail::parse_error(
+          path, reader.line(),
+          "expected one timestamp, found " + std::to_string(f.size()) + " fields");
+    const double v = io::detail::parse_double(f[0], path, reader.line(), "timestamp");
+    if (!t.empty() && !(v > t.back()))
+      io::detail::parse_error(path, reader.line(), "timestamps must strictly increase");
+    t.push_back(v);
+  }
+  if (t.size() != n)
+    throw InvalidArgument(path + ": " + std::to_string(t.size()) + " timestamps for " +
+                          std::to_string(n) + " trajectory poses");
+  return t;
+}
+
+std::string json_num(double v) {
+  return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
+}
+
+/// Checks the anchors' geometry before anything runs: at least INIT's count, and the first ones
+/// (those INIT uses) not coincident horizontally (a vertical line or a point leaves yaw and scale
+/// unobservable).
+void check_anchor_geometry(const std::vector<io::Anchor>& a, const std::string& path,
+                           const correction::InitOptions& init) {
+  const int need = init.num_correspondences;
+  if (static_cast<int>(a.size()) < need)
+    throw InvalidArgument(path + ": " + std::to_string(a.size()) +
+                          " anchor(s); INIT needs at least " + std::to_string(need) +
+                          " anchors (fewer than " + std::to_string(need) + " anchors)");
+  double spread = 0;
+  for (int i = 0; i < need; ++i)
+    for (int j = i + 1; j < need; ++j)
+      spread = std::max(spread, (a[i].y_w - a[j].y_w).head<2>().norm());
+  std::ostringstream lines;
+  for (int i = 0; i < need; ++i) lines << (i ? ", " : "") << a[i].line;
+  if (spread < init.min_anchor_spread_m) {
+    double spread3 = 0;
+    for (int i = 0; i < need; ++i)
+      for (int j = i + 1; j < need; ++j) spread3 = std::max(spread3, (a[i].y_w - a[j].y_w).norm());
+    std::ostringstream os;
+    os << path << ": the first " << need << " anchors (lines " << lines.str() << ") ";
+    if (spread3 < init.min_anchor_spread_m)
+      os << "are coincident (all within " << spread3 << " m)";
+    else
+      os << "are collinear on one vertical line (horizontal spread " << spread << " m)";
+    os << ": scale and yaw are unobservable (degenerate anchors; need a horizontal spread of at "
+          "least "
+       << init.min_anchor_spread_m << " m)";
+    throw InvalidArgument(os.str());
+  }
+}
+
+}  // namespace
+
+int run_correct(int argc, char** argv) {
+  const Args args(argc, argv,
+                  {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
+                   "keyframe-step", "links", "out"},
+                  {"help", "force"});
+  if (args.flag("help")) {
+    std::fputs(kCorrectHelp, stdout);
+    return 0;
+  }
+  const std::string traj_path = args.required("trajectory");
+  const std::string anchors_path = args.required("anchors");
+  const std::string out_dir = args.required("out");
+  const bool with_map = args.has("map");
+  correction::CorrectorOptions opt;
+  io::TrajectoryFormat format;
+  try {
+    opt.mode = correction::mode_from_string(args.get("mode", "ours"));
+    format = io::parse_trajectory_format(args.get("format", "auto"));
+  } catch (const InvalidArgument& e) {
+    throw UsageError(e.what());
+  }
+  const long long step = args.get_int("keyframe-step", 1);
+  if (step < 1) throw UsageError("--keyframe-step must be >= 1");
+  if (with_map && args.has("keyframe-step"))
+    throw UsageError(
+        "--keyframe-step applies without --map only (the map's images are the "
+        "keyframes)");
+  const long long links = args.get_int("links", with_map ? 1 : 5);
+  if (links < 1 || links > 100) throw UsageError("--links must be in [1, 100]");
+  if (!with_map && opt.mode == correction::Mode::kInitBa)
+    throw UsageError("--mode init+ba needs --map (bundle adjustment needs map points)");
+  opt.link_consecutive = true;
+  opt.consecutive_links = static_cast<int>(links);
+  // Check --out before the work (StagedOutput below re-checks and stages).
+  {
+    std::error_code ec;
+    const std::filesystem::path p(out_dir);
+    if (std::filesystem::exists(p, ec) && !std::filesystem::is_directory(p, ec))
+      throw Error("--out '" + out_dir +
+                  "' exists and is not a directory (refusing to replace "
+                  "a file)");
+  }
+
+  // ---- inputs -------------------------------------------------------------------------------
+  io::Trajectory traj = io::read_trajectory(traj_path, format);
+  if (args.has("times")) {
+    const std::vector<double> t = read_times(args.get("times"), traj.poses.size());
+    for (std::size_t i = 0; i < t.size(); ++i) traj.poses[i].timestamp = t[i];
+    traj.has_timestamps = true;
+  }
+  const std::size_t np = traj.poses.size();
+  if (np < 2)
+    throw InvalidArgument(traj_path + ": needs at least 2 poses, has " + std::to_string(np));
+
+  const io::AnchorTable table = io::read_anchors_csv(anchors_path);
+  geo::LocalFrame frame;
+  if (args.has("origin")) {
+    const std::vector<double> o = parse_number_list("origin", args.get("origin"));
+    if (o.size() != 3) throw UsageError("--origin needs LAT,LON,H (3 numbers)");
+    frame = geo::LocalFrame::from_geodetic(o[0], o[1], o[2]);
+  } else {
+    if (table.kind == io::AnchorPositionKind::kWorld)
+      throw UsageError(anchors_path + ": anchors given as x,y,z in W need --origin LAT,LON,H");
+    frame = io::local_frame_at_first_anchor(table);
+  }
+  std::vector<io::Anchor> anchors = io::anchors_in_world(table, frame);
+  std::vector<io::AnchorLocation> locs = io::locate_anchors(anchors, traj, anchors_path);
+  {  // time order
+    std::vector<std::size_t> order(anchors.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return locs[a].index + locs[a].fraction < locs[b].index + locs[b].fraction;
+    });
+    std::vector<io::Anchor> a2;
+    std::vector<io::AnchorLocation> l2;
+    for (std::size_t i : order) a2.push_back(anchors[i]), l2.push_back(locs[i]);
+    anchors.swap(a2);
+    locs.swap(l2);
+  }
+  check_anchor_geometry(anchors, anchors_path, opt.init);
+
+  // ---- keyframes: trajectory index of each -------------------------------------------------
+  map::Map m;
+  io::ColmapModel model;
+  std::vector<std::size_t> kf_pose;  // trajectory index of each keyframe
+  auto ts_of = [&](std::size_t p) {
+    const double t = traj.poses[p].timestamp;
+    return std::isfinite(t) ? t : static_cast<double>(traj.poses[p].frame);
+  };
+  if (with_map) {
+    model = io::read_colmap_text(args.get("map"));
+    m = model.map;
+    GEODRIFT_CHECK(!m.keyframes.empty(), args.get("map") << ": the model has no images");
+    for (std::size_t i = 0; i < m.keyframes.size(); ++i) {
+      map::Keyframe& k = m.keyframes[i];
+      std::size_t best = np;
+      for (std::size_t p = 0; p < np; ++p) {
+        const bool hit = std::isfinite(k.timestamp)
+                             ? std::abs(traj.poses[p].timestamp - k.timestamp) < 1e-4
+                             : traj.poses[p].frame == k.frame_index;
+        if (hit) {
+          best = p;
+          break;
+        }
+      }
+      if (best == np)
+        throw InvalidArgument(args.get("map") + "/images.txt: image '" + model.image_names[i] +
+                              "' (frame " + std::to_string(k.frame_index) +
+                              ") matches no pose of " + traj_path);
+      if (!kf_pose.empty() && best <= kf_pose.back())
+        throw InvalidArgument(args.get("map") + "/images.txt: image '" + model.image_names[i] +
+                              "' is not after the previous image in time");
+      kf_pose.push_back(best);
+      k.timestamp = ts_of(best);
+    }
+  } else {
+    for (std::size_t p = 0; p < np; p += static_cast<std::size_t>(step)) kf_pose.push_back(p);
+    if (kf_pose.back() != np - 1) kf_pose.push_back(np - 1);
+    for (std::size_t i = 0; i < kf_pose.size(); ++i) {
+      map::Keyframe k;
+      k.id = static_cast<int>(i);
+      k.frame_index = traj.poses[kf_pose[i]].frame;
+      k.timestamp = ts_of(kf_pose[i]);
+      k.T_cw = traj.poses[kf_pose[i]].T_cw;
+      m.keyframes.push_back(k);
+    }
+  }
+  const std::size_t nk = kf_pose.size();
+  // Keyframe governing each pose: the last at or before it (the first for poses before it).
+  std::vector<int> gov(np, 0);
+  std::vector<int> kf_at(np, -1);
+  for (std::size_t i = 0; i < nk; ++i) kf_at[kf_pose[i]] = static_cast<int>(i);
+  {
+    int g = 0;
+    for (std::size_t p = 0; p < np; ++p) {
+      if (kf_at[p] >= 0) g = kf_at[p];
+      gov[p] = g;
+    }
+  }
+
+  // ---- anchors -> correspondences ----------------------------------------------------------
+  std::vector<map::Correspondence> corr;
+  for (std::size_t j = 0; j < anchors.size(); ++j) {
+    const io::AnchorLocation& L = locs[j];
+    const std::size_t nxt = std::min(L.index + 1, np - 1);
+    const lie::SE3d T_a = interpolate(traj.poses[L.index].T_cw, traj.poses[nxt].T_cw, L.fraction);
+    const int k = gov[L.index];
+    map::Correspondence c;
+    c.id = static_cast<int>(j);
+    c.keyframe = m.keyframes[k].id;
+    c.T_vk = T_a * traj.poses[kf_pose[k]].T_cw.inverse();
+    c.y_w = anchors[j].y_w;
+    c.sigma_m = std::isfinite(anchors[j].sigma_m) ? anchors[j].sigma_m : 0.0;
+    c.geotag_id = static_cast<int>(j);
+    corr.push_back(c);
+  }
+
+  StagedOutput out(out_dir, args.flag("force"));
+
+  // ---- correction --------------------------------------------------------------------------
+  correction::Corrector corrector(opt);
+  const bool tty = stderr_is_tty();
+  const auto t0 = std::chrono::steady_clock::now();
+  correction::replay(m, corr, &corrector, [&](int i) {
+    if (tty && (i % 50 == 0 || i + 1 == static_cast<int>(nk)))
+      std::fprintf(stderr, "\rgeodrift correct: keyframe %d / %zu", i + 1, nk);
+  });
+  const double total_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (tty) std::fputc('\n', stderr);
+  if (!corrector.initialized())
+    throw Error("INIT did not succeed with the anchors of " + anchors_path + ": " +
+                (corrector.init_message().empty() ? std::string("too few usable anchors")
+                                                  : corrector.init_message()));
+
+  // ---- every pose in W -----------------------------------------------------------------------
+  const std::size_t last_anchor_index = locs.back().index;
+  std::vector<io::TrajectoryCsvRow> rows(np);
+  io::Trajectory out_traj;
+  out_traj.has_timestamps = traj.has_timestamps;
+  std::vector<Eigen::Vector3d> track;
+  for (std::size_t p = 0; p < np; ++p) {
+    const int k = gov[p];
+    lie::SE3d T;
+    if (kf_at[p] >= 0) {
+      T = corrector.keyframe_pose_w(kf_at[p]);
+    } else {
+      const lie::SE3d dT = traj.poses[p].T_cw * traj.poses[kf_pose[k]].T_cw.inverse();
+      T = (lie::Sim3d(dT) * corrector.keyframe_sim3(k)).to_se3();
+    }
+    rows[p].frame = traj.poses[p].frame;
+    rows[p].timestamp = traj.poses[p].timestamp;
+    rows[p].keyframe = kf_at[p] >= 0;
+    rows[p].T_cw = T;
+    rows[p].after_last_anchor = p > last_anchor_index;
+    io::TrajectoryPose tp = traj.poses[p];
+    tp.T_cw = T;
+    out_traj.poses.push_back(tp);
+    track.push_back(T.inverse().translation());
+  }
+  const std::string note = frame.description();
+  io::write_trajectory_csv(out.path("trajectory.csv"), rows, frame,
+                           "mode " + std::string(correction::to_string(opt.mode)));
+  io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), out_traj, note);
+  io::write_trajectory_tum(out.path("trajectory_tum.txt"), out_traj, note);
+  io::write_geojson(out.path("track.geojson"), track, anchors, frame);
+  io::write_kml(out.path("track.kml"), track, anchors, frame);
+  if (with_map) {
+    io::PointCloud cloud;
+    for (int i = 0; i < corrector.num_points(); ++i) cloud.points.push_back(corrector.point_w(i));
+    if (model.point_colors.size() == cloud.points.size()) cloud.colors = model.point_colors;
+    io::write_ply(out.path("points.ply"), cloud, note);
+  }
+  {
+    io::SvgSeries path{"corrected path", "#1f77b4", 1.5, {}, false};
+    for (const auto& c : track) path.points.push_back(c.head<2>());
+    std::vector<io::SvgMarker> markers;
+    for (const auto& a : anchors)
+      markers.push_back({"anchor line " + std::to_string(a.line), a.y_w.head<2>(), "#d62728"});
+    io::write_svg_topview(out.path("topview.svg"), {path}, markers,
+                          "geodrift correct: corrected path (top view)", note);
+  }
+  {
+    // Without ground truth: the local scale s_i of the corrected Sim3 keyframe poses (M units
+    // per metre), normalised by its median, along the corrected path.
+    std::vector<double> s(nk);
+    for (std::size_t i = 0; i < nk; ++i)
+      s[i] = corrector.keyframe_sim3(static_cast<int>(i)).scale();
+    std::vector<double> sorted = s;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double med = sorted[sorted.size() / 2];
+    io::SvgSeries ser{"s_i / median", "#2ca02c", 1.5, {}, false};
+    double dist = 0;
+    for (std::size_t i = 0; i < nk; ++i) {
+      if (i > 0)
+        dist += (corrector.keyframe_center_w(static_cast<int>(i)) -
+                 corrector.keyframe_center_w(static_cast<int>(i) - 1))
+                    .norm();
+      ser.points.push_back({dist, s[i] / med});
+    }
+    io::write_svg_line_plot(out.path("scale.svg"), {ser},
+                            "local map scale of the corrected keyframes (M units per metre / "
+                            "median; no ground truth, not the scale factor vs GT)",
+                            "distance along the corrected path [m]", "s_i / median s",
+                            "frame: " + note + "; units: metres (x), ratio (y)", 1.0);
+  }
+  {
+    std::ostringstream j;
+    const auto& ir = corrector.init_result();
+    j << "{\n  \"geodrift_version\": " << io::detail::json_string(kVersion)
+      << ",\n  \"command_line\": " << io::detail::json_string(command_line(argc, argv))
+      << ",\n  \"frame\": " << io::detail::json_string(note)
+      << ",\n  \"units\": \"metres, seconds\""
+      << ",\n  \"parameters\": {\"mode\": "
+      << io::detail::json_string(correction::to_string(opt.mode))
+      << ", \"trajectory\": " << io::detail::json_string(traj_path)
+      << ", \"trajectory_format\": " << io::detail::json_string(io::to_string(traj.format))
+      << ", \"map\": " << (with_map ? io::detail::json_string(args.get("map")) : "null")
+      << ", \"anchors\": " << io::detail::json_string(anchors_path)
+      << ", \"trajectory_only\": " << (with_map ? "false" : "true")
+      << ", \"keyframe_step\": " << (with_map ? 0 : step) << ", \"consecutive_links\": " << links
+      << ", \"window_correspondences\": " << opt.window_correspondences
+      << ", \"lambda1\": " << json_num(opt.lambda1) << ", \"lambda2\": " << json_num(opt.lambda2)
+      << ", \"lambda3\": " << json_num(opt.lambda3)
+      << ", \"min_shared_points\": " << opt.min_shared_points
+      << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px) << "}"
+      << ",\n  \"counts\": {\"poses\": " << np << ", \"keyframes\": " << nk
+      << ", \"points\": " << corrector.num_points() << ", \"anchors\": " << anchors.size()
+      << ", \"correspondences_used\": " << corrector.correspondences().size() << "}"
+      << ",\n  \"init\": {\"ok\": " << (ir.ok ? "true" : "false")
+      << ", \"message\": " << io::detail::json_string(ir.message)
+      << ", \"scale_m_units_per_metre\": " << json_num(1.0 / ir.S_wm.scale())
+      << ", \"rms_m\": " << json_num(ir.rms_m) << ", \"inliers\": " << ir.inliers.size()
+      << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
+      << ",\n  \"last_anchor_frame\": " << traj.poses[last_anchor_index].frame
+      << ",\n  \"steps\": [";
+    const auto& reps = corrector.reports();
+    for (std::size_t i = 0; i < reps.size(); ++i) {
+      const auto& r = reps[i];
+      j << (i ? "," : "") << "\n    {\"kind\": " << io::detail::json_string(r.kind)
+        << ", \"correspondence\": " << r.correspondence << ", \"window_keyframes\": ["
+        << r.window_first_keyframe << ", " << r.window_last_keyframe << "], \"nodes\": " << r.nodes
+        << ", \"edges\": " << r.edges << ", \"initial_cost\": " << json_num(r.initial_cost)
+        << ", \"final_cost\": " << json_num(r.final_cost) << ", \"iterations\": " << r.iterations
+        << ", \"termination\": " << io::detail::json_string(r.termination)
+        << ", \"seconds\": " << json_num(r.seconds) << "}";
+    }
+    j << "\n  ],\n  \"correction_seconds_total\": " << json_num(total_s) << "\n}\n";
+    io::detail::write_atomically(out.path("report.json"), [&](std::ostream& os) { os << j.str(); });
+  }
+  out.commit();
+  std::printf(
+      "geodrift correct: %zu poses (%zu keyframes), %zu anchors, mode %s, correction "
+      "%.3f s -> %s\n",
+      np, nk, anchors.size(), correction::to_string(opt.mode), total_s, out.out().string().c_str());
+  return 0;
+}
+
+}  // namespace geodrift::cli

@@ -1,0 +1,15 @@
+#pragma once
+/// @file
+/// The geodrift subcommands. Each takes the arguments AFTER the subcommand name (argv[0] is the
+/// subcommand), prints its own --help, and returns the process exit code: 0 on success, 1 on a
+/// failure of the input or the computation, 2 on a usage error. They may throw; main() turns an
+/// exception into a message and exit code 1.
+
+namespace geodrift::cli {
+
+int run_correct(int argc, char** argv);     ///< geodrift correct (cmd_correct.cpp)
+int run_eval(int argc, char** argv);        ///< geodrift eval (cmd_eval.cpp)
+int run_simulate(int argc, char** argv);    ///< geodrift simulate (cmd_simulate.cpp)
+int run_experiment(int argc, char** argv);  ///< geodrift experiment (cmd_experiment.cpp)
+
+}  // namespace geodrift::cli

@@ -1,0 +1,272 @@
+// The geodrift command end to end: bad input gives a clear message, a non-zero exit and no
+// output; simulate -> correct -> eval on a stretch of KITTI 02 improves on INIT only.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+  int code = -1;
+  std::string output;  // stdout + stderr
+};
+
+Run run(const std::string& args) {
+  const std::string cmd = std::string("'") + GEODRIFT_CLI_EXE + "' " + args + " 2>&1";
+  Run r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  REQUIRE(p != nullptr);
+  char buf[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+struct TempDir {
+  fs::path dir;
+  TempDir() {
+    dir = fs::temp_directory_path() / ("geodrift_cli_test_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+  std::string path(const std::string& name) const { return (dir / name).string(); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(path(name)) << text;
+    return path(name);
+  }
+};
+
+/// No leftovers of a failed run: neither --out nor a staging folder beside it.
+bool no_outputs(const TempDir& t, const std::string& out_name) {
+  if (fs::exists(t.dir / out_name)) return false;
+  for (const auto& e : fs::directory_iterator(t.dir))
+    if (e.path().filename().string().find("geodrift-tmp") != std::string::npos) return false;
+  return true;
+}
+
+/// A small KITTI trajectory in M: 40 poses on a curve in M's x-z plane (y down, as a camera
+/// driving on flat ground), 0.5 M units apart.
+std::string trajectory_text(int n = 40) {
+  std::ostringstream os;
+  for (int i = 0; i < n; ++i) {
+    const double t = 0.04 * i;
+    const double x = 10 * std::sin(t), z = 10 * (1 - std::cos(t)) + 0.5 * i;
+    os << "1 0 0 " << x << " 0 1 0 0 0 0 1 " << z << "\n";
+  }
+  return os.str();
+}
+
+/// Anchors in W (x,y,z; needs --origin): W = 2 · (x_M, z_M, -y_M).
+std::string anchors_text(const std::vector<int>& frames) {
+  std::ostringstream os;
+  os << "frame,x,y,z,sigma_m\n";
+  for (int f : frames) {
+    const double t = 0.04 * f;
+    os << f << "," << 2 * 10 * std::sin(t) << "," << 2 * (10 * (1 - std::cos(t)) + 0.5 * f)
+       << ",0,0.05\n";
+  }
+  return os.str();
+}
+
+/// Mean 2D error from `geodrift eval --json` output.
+double mean_2d(const std::string& json) {
+  const std::string key = "\"error_2d\": {\"mean\": ";
+  const auto p = json.find(key);
+  REQUIRE(p != std::string::npos);
+  return std::stod(json.substr(p + key.size()));
+}
+
+}  // namespace
+
+TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no output", "[cli]") {
+  TempDir t;
+  const std::string traj = t.write("traj.txt", trajectory_text());
+  const std::string good = t.write("good.csv", anchors_text({5, 15, 25, 35}));
+  const std::string base = "correct --origin 49.0,8.4,100 --trajectory " + traj;
+  const auto correct = [&](const std::string& anchors, const std::string& extra = "") {
+    return run(base + " --anchors " + anchors + " --out " + t.path("out") + " " + extra);
+  };
+  const auto expect_failure = [&](const Run& r, const std::vector<std::string>& words) {
+    INFO(r.output);
+    CHECK(r.code != 0);
+    for (const auto& w : words) CHECK(r.output.find(w) != std::string::npos);
+    CHECK(no_outputs(t, "out"));
+  };
+
+  SECTION("the good input works (so the failures below are the input's)") {
+    const Run r = correct(good, "--mode init");
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(fs::exists(t.path("out/trajectory.csv")));
+    CHECK(fs::exists(t.path("out/report.json")));
+  }
+  SECTION("fewer than 4 anchors") {
+    expect_failure(correct(t.write("a.csv", anchors_text({5, 15, 25}))),
+                   {"a.csv", "fewer than 4 anchors"});
+  }
+  SECTION("coincident anchors") {
+    expect_failure(correct(t.write("a.csv", anchors_text({5, 5, 5, 5}))),
+                   {"a.csv", "coincident", "unobservable"});
+  }
+  SECTION("collinear (vertical) anchors") {
+    expect_failure(
+        correct(t.write("a.csv", "frame,x,y,z\n5,1,2,0\n15,1,2,3\n25,1,2,6\n35,1,2,9\n")),
+        {"a.csv", "collinear", "unobservable"});
+  }
+  SECTION("an anchor outside the trajectory's range") {
+    expect_failure(correct(t.write("a.csv", anchors_text({5, 15, 25, 35, 60}))),
+                   {"a.csv:6", "outside the trajectory"});
+  }
+  SECTION("NaN and short lines in the anchors file") {
+    expect_failure(
+        correct(t.write("a.csv", "frame,x,y,z\n5,1,2,0\n15,nan,2,3\n25,5,2,6\n35,9,2,9\n")),
+        {"a.csv:3"});
+    expect_failure(correct(t.write("b.csv", "frame,x,y,z\n5,1,2,0\n15,3,2\n25,5,2,6\n35,9,2,9\n")),
+                   {"b.csv:3"});
+  }
+  SECTION("NaN and short lines in the trajectory") {
+    std::string text = trajectory_text();
+    const auto third = text.find('\n', text.find('\n', text.find('\n') + 1) + 1) + 1;  // line 4
+    std::string nan = text;
+    nan.replace(third, 1, "nan");
+    const std::string tn = t.write("nan.txt", nan);
+    expect_failure(run("correct --origin 49,8.4,100 --trajectory " + tn + " --anchors " + good +
+                       " --out " + t.path("out")),
+                   {"nan.txt:4"});
+    std::string shrt = text;
+    shrt.insert(third, "1 0 0 1 0 1 0\n");
+    const std::string ts = t.write("short.txt", shrt);
+    expect_failure(run("correct --origin 49,8.4,100 --trajectory " + ts + " --anchors " + good +
+                       " --out " + t.path("out")),
+                   {"short.txt:4"});
+  }
+  SECTION("NaN and short lines in the times file") {
+    std::string times;
+    for (int i = 0; i < 40; ++i)
+      times += (i == 7 ? std::string("nan") : std::to_string(0.1 * i)) + "\n";
+    expect_failure(correct(good, "--times " + t.write("times.txt", times)), {"times.txt:8"});
+    times.clear();
+    for (int i = 0; i < 39; ++i) times += std::to_string(0.1 * i) + "\n";
+    expect_failure(correct(good, "--times " + t.write("t2.txt", times)),
+                   {"t2.txt", "39 timestamps for 40"});
+  }
+  SECTION("a missing file") {
+    expect_failure(correct(t.path("no_such_anchors.csv")), {"no_such_anchors.csv"});
+    expect_failure(run("correct --trajectory " + t.path("no_such_traj.txt") + " --anchors " + good +
+                       " --out " + t.path("out")),
+                   {"no_such_traj.txt"});
+    expect_failure(correct(good, "--map " + t.path("no_such_map")), {"no_such_map"});
+  }
+  SECTION("an unknown option or mode") {
+    const Run r = correct(good, "--bogus 1");
+    expect_failure(r, {"unknown option", "--bogus"});
+    CHECK(r.code == 2);
+    expect_failure(correct(good, "--mode fast"), {"unknown correction mode", "fast"});
+    expect_failure(correct(good, "--mode init+ba"), {"needs --map"});
+  }
+  SECTION("--out an existing file is refused and left untouched") {
+    const std::string f = t.write("out", "precious\n");
+    const Run r = correct(good);
+    INFO(r.output);
+    CHECK(r.code != 0);
+    CHECK(r.output.find("not a directory") != std::string::npos);
+    std::ifstream in(f);
+    std::string s;
+    std::getline(in, s);
+    CHECK(s == "precious");
+  }
+  SECTION("--out a non-empty folder needs --force, which keeps other files") {
+    fs::create_directories(t.path("out"));
+    t.write("out/mine.txt", "precious\n");
+    const Run r = correct(good, "--mode init");
+    INFO(r.output);
+    CHECK(r.code != 0);
+    CHECK(r.output.find("not empty") != std::string::npos);
+    CHECK_FALSE(fs::exists(t.path("out/trajectory.csv")));
+    const Run f = correct(good, "--mode init --force");
+    INFO(f.output);
+    CHECK(f.code == 0);
+    CHECK(fs::exists(t.path("out/trajectory.csv")));
+    CHECK(fs::exists(t.path("out/mine.txt")));
+  }
+  SECTION("every subcommand has --help") {
+    for (const char* c : {"correct", "eval", "simulate"}) {
+      const Run r = run(std::string(c) + " --help");
+      CHECK(r.code == 0);
+      CHECK(r.output.find("usage: geodrift") != std::string::npos);
+    }
+    CHECK(run("frobnicate").code == 2);
+  }
+}
+
+TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only", "[cli]") {
+  TempDir t;
+  const std::string data = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const Run sim = run("simulate --sequence 02 --frames 0:1000 --interval 100 --seed 3 --data-dir " +
+                      data + " --out " + t.path("sim"));
+  INFO(sim.output);
+  REQUIRE(sim.code == 0);
+  for (const char* f :
+       {"trajectory_kitti.txt", "anchors.csv", "ground_truth_kitti.txt", "ground_truth_w.txt",
+        "colmap/cameras.txt", "colmap/images.txt", "colmap/points3D.txt"})
+    CHECK(fs::exists(t.path("sim/") + f));
+  const std::string in = "--trajectory " + t.path("sim/trajectory_kitti.txt") + " --anchors " +
+                         t.path("sim/anchors.csv");
+  const auto correct_eval = [&](const std::string& name, const std::string& extra) {
+    const Run c = run("correct " + in + " " + extra + " --out " + t.path(name));
+    INFO(c.output);
+    REQUIRE(c.code == 0);
+    const Run e = run("eval --json --result " + t.path(name) + " --ground-truth " +
+                      t.path("sim/ground_truth_kitti.txt") + " --kitti-to-w");
+    INFO(e.output);
+    REQUIRE(e.code == 0);
+    return mean_2d(e.output);
+  };
+  const std::string map = "--map " + t.path("sim/colmap");
+  const double init = correct_eval("init", map + " --mode init");
+  const double ours = correct_eval("ours", map);
+  const double traj_only = correct_eval("traj", "");
+  INFO("mean 2D error: init " << init << " m, ours " << ours << " m, trajectory-only " << traj_only
+                              << " m");
+  CHECK(ours < init);
+  CHECK(traj_only < init);
+  for (const char* f :
+       {"trajectory.csv", "trajectory_kitti.txt", "trajectory_tum.txt", "track.geojson",
+        "track.kml", "points.ply", "topview.svg", "scale.svg", "report.json"})
+    CHECK(fs::exists(t.path("ours/") + f));
+  CHECK_FALSE(fs::exists(t.path("traj/points.ply")));
+
+  // Every input frame appears; with --keyframe-step the others are interpolated.
+  const Run c = run("correct " + in + " --keyframe-step 3 --out " + t.path("step"));
+  INFO(c.output);
+  REQUIRE(c.code == 0);
+  std::ifstream csv(t.path("step/trajectory.csv"));
+  std::string line;
+  int rows = 0, interpolated = 0;
+  while (std::getline(csv, line))
+    if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) {
+      ++rows;
+      interpolated += line.find(",interpolated,") != std::string::npos;
+    }
+  int poses = 0;
+  std::ifstream tk(t.path("sim/trajectory_kitti.txt"));
+  while (std::getline(tk, line)) poses += !line.empty() && line[0] != '#';
+  CHECK(rows == poses);
+  CHECK(interpolated > poses / 2);
+}
