@@ -385,6 +385,10 @@ TEST_CASE("Invalid options are rejected by validate with a message", "[solver]")
   CHECK_FALSE(o.validate(&why));
   CHECK_THAT(why, Catch::Contains("gradient_tolerance"));
   o = Options{};
+  o.min_lambda = 1.0;  // above initial_lambda
+  CHECK_FALSE(o.validate(&why));
+  CHECK_THAT(why, Catch::Contains("min_lambda"));
+  o = Options{};
   o.min_diagonal = 10.0;
   o.max_diagonal = 1.0;
   CHECK_FALSE(o.validate(&why));

@@ -67,6 +67,9 @@ struct Options {
   double initial_lambda = 1e-4;
   /// Stop (no step can decrease the cost) when λ exceeds this.
   double max_lambda = 1e32;
+  /// λ never drops below this (as Ceres' max trust-region radius 1e16), so that a rejected
+  /// step after a long run of very successful ones recovers damping in a few iterations.
+  double min_lambda = 1e-16;
   /// Clamp of the Jacobi-scaled diagonal used for damping (as Ceres' min/max_lm_diagonal).
   double min_diagonal = 1e-6;
   double max_diagonal = 1e32;
@@ -97,6 +100,8 @@ struct Options {
       os << "initial_lambda " << initial_lambda << " not finite and > 0";
     else if (!(max_lambda >= initial_lambda))
       os << "max_lambda " << max_lambda << " < initial_lambda " << initial_lambda;
+    else if (!(min_lambda >= 0.0) || !(min_lambda <= initial_lambda))
+      os << "min_lambda " << min_lambda << " not in [0, initial_lambda " << initial_lambda << "]";
     else if (!(min_diagonal > 0.0) || !(max_diagonal >= min_diagonal))
       os << "diagonal clamp [" << min_diagonal << ", " << max_diagonal << "] is not 0 < min <= max";
     else if (num_threads != 1 && num_threads != 2)
@@ -360,7 +365,7 @@ class LevenbergMarquardt {
         const double old_cost = cost;
         cost = new_cost;
         const double t = 2.0 * rho - 1.0;
-        lambda *= std::max(1.0 / 3.0, 1.0 - t * t * t);
+        lambda = std::max(options_.min_lambda, lambda * std::max(1.0 / 3.0, 1.0 - t * t * t));
         nu = 2.0;
         if (old_cost - new_cost <= options_.function_tolerance * old_cost) {
           return done(sum, cost, lambda, Termination::kFunctionTolerance,
