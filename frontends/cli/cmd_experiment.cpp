@@ -1,0 +1,344 @@
+// geodrift experiment: the paper's KITTI experiment (Sec. 4.3, Table 2) on the simulator.
+// For each sequence and seed the monocular drift is simulated once (sim::simulate with its
+// committed defaults); for each geo-tag interval the KITTI-protocol correspondences are made
+// and every method corrects the same map through the same Corrector stream (replay()). Cells
+// are mean ± sd over seeds of the mean 2D error over all keyframes (DESIGN.md "Evaluation").
+#include <Eigen/Core>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cli_util.hpp"
+#include "commands.hpp"
+#include "geodrift/correction/replay.hpp"
+#include "geodrift/eval/errors.hpp"
+#include "geodrift/eval/scale_factor.hpp"
+#include "geodrift/geo/kitti.hpp"
+#include "geodrift/io/svg.hpp"
+#include "geodrift/sim/drift_simulator.hpp"
+#include "geodrift/sim/kitti_protocol.hpp"
+#include "geodrift/version.hpp"
+
+namespace geodrift::cli {
+namespace {
+
+constexpr const char* kHelp =
+    "usage: geodrift experiment [options]\n"
+    "\n"
+    "Regenerates the paper's KITTI table (Iwami et al., Table 2) on the monocular-drift\n"
+    "simulator: rows INIT, INIT+BA, INIT+PGO, Ours (INIT+PGO+BA), full batch, and the global\n"
+    "Sim3 alignment of the uncorrected path; columns geo-tag intervals; cells mean +- sd of the\n"
+    "mean 2D error [m] over seeds. Writes RESULTS.md, scale_<seq>.svg (interval 300 or the\n"
+    "nearest given) and topview_<seq>.svg into --out.\n"
+    "\n"
+    "options:\n"
+    "  --sequences LIST   KITTI sequences, of 02,08 (default 02,08)\n"
+    "  --intervals LIST   geo-tag intervals in frames (default 100,200,300,400,500)\n"
+    "  --seeds LIST       simulator seeds (default 1,2,3,4,5)\n"
+    "  --data-dir DIR     folder with poses/, times/ and calib files (default data/kitti)\n"
+    "  --threads N        seeds run in parallel (1 or 2, default 2)\n"
+    "  --out DIR          output folder (required); --force to write into a non-empty one\n";
+
+struct Method {
+  const char* name;
+  correction::Mode mode;
+};
+const Method kMethods[] = {{"INIT", correction::Mode::kInitOnly},
+                           {"INIT+BA", correction::Mode::kInitBa},
+                           {"INIT+PGO", correction::Mode::kInitPgo},
+                           {"Ours (INIT+PGO+BA)", correction::Mode::kOurs},
+                           {"Full batch", correction::Mode::kFullBatch}};
+constexpr int kNumMethods = 5;
+
+/// The paper's Table 2, for the rows it reports (intervals 100..500).
+std::vector<double> paper_row(const std::string& seq, const std::string& method) {
+  if (method == "INIT+BA")
+    return seq == "02" ? std::vector<double>{1.15, 2.22, 65.86, 164.17, 96.66}
+                       : std::vector<double>{0.45, 1.24, 18.43, 148.17, 52.40};
+  if (method == "INIT+PGO")
+    return seq == "02" ? std::vector<double>{4.57, 4.26, 7.54, 10.89, 11.96}
+                       : std::vector<double>{0.93, 2.83, 4.64, 5.44, 9.11};
+  if (method.rfind("Ours", 0) == 0) return sim::paper_ours_2d_error_m(seq);
+  return {};
+}
+
+struct Cell {
+  std::vector<double> values;  // one per seed
+  double seconds = 0;          // correction time summed over seeds
+};
+
+struct SeqResult {
+  std::map<std::pair<int, int>, Cell> cells;  // (method, interval index)
+  std::vector<double> global_sim3;            // per seed
+  std::vector<sim::DriftStatistics> drift;    // per seed
+  double sim_seconds = 0;
+  // For the plots (first seed, plot interval): per method keyframe centres; ground truth.
+  std::vector<std::vector<Eigen::Vector3d>> plot_centres;
+  std::vector<Eigen::Vector3d> plot_gt, plot_init_only;
+  std::vector<Eigen::Vector3d> plot_anchors;
+  int keyframes = 0, points = 0, correspondences_100 = 0;
+};
+
+double mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? NAN : s / static_cast<double>(v.size());
+}
+double sd(const std::vector<double>& v) {
+  if (v.size() < 2) return 0;
+  const double m = mean(v);
+  double s = 0;
+  for (double x : v) s += (x - m) * (x - m);
+  return std::sqrt(s / static_cast<double>(v.size() - 1));
+}
+std::string fmt_cell(const Cell& c) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.2f ± %.2f", mean(c.values), sd(c.values));
+  return b;
+}
+
+std::vector<Eigen::Vector3d> centres(const correction::Corrector& c) {
+  std::vector<Eigen::Vector3d> out;
+  for (int i = 0; i < c.num_keyframes(); ++i) out.push_back(c.keyframe_center_w(i));
+  return out;
+}
+
+void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
+              const std::vector<int>& intervals, int plot_interval, bool first_seed, SeqResult* res,
+              std::mutex* mu, int* done, int total) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const sim::SimulatedSequence s = sim::simulate(seq, sim::SimOptions::kitti(name, seed));
+  const double sim_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const sim::DriftStatistics drift = sim::drift_statistics(s);
+  std::map<std::pair<int, int>, std::pair<double, double>> local;  // (m, i) -> (err, secs)
+  std::vector<std::vector<Eigen::Vector3d>> plot(kNumMethods);
+  std::vector<Eigen::Vector3d> anchors;
+  int corr100 = 0;
+  for (std::size_t ii = 0; ii < intervals.size(); ++ii) {
+    std::vector<sim::GeoView> views;
+    const auto corr = sim::kitti_correspondences(s, intervals[ii], &views);
+    if (intervals[ii] == 100) corr100 = static_cast<int>(corr.size());
+    for (int m = 0; m < kNumMethods; ++m) {
+      correction::CorrectorOptions opt;
+      opt.mode = kMethods[m].mode;
+      correction::Corrector c(opt);
+      correction::replay(s.map, corr, &c);
+      double secs = 0;
+      for (const auto& r : c.reports()) secs += r.seconds;
+      double err = NAN;
+      if (c.initialized()) {
+        const auto est = centres(c);
+        err = eval::horizontal_errors(est, s.gt_center_w).all.mean;
+        if (first_seed && intervals[ii] == plot_interval) plot[m] = est;
+      }
+      local[{m, static_cast<int>(ii)}] = {err, secs};
+      if (first_seed && intervals[ii] == plot_interval && m == 0)
+        for (const auto& cc : corr) anchors.push_back(cc.y_w);
+    }
+    std::lock_guard<std::mutex> lock(*mu);
+    ++*done;
+    if (stderr_is_tty())
+      std::fprintf(stderr, "\r  %d/%d runs (sequence %s, seed %u, interval %d)   ", *done, total,
+                   name.c_str(), seed, intervals[ii]);
+  }
+  std::lock_guard<std::mutex> lock(*mu);
+  for (const auto& [k, v] : local) {
+    res->cells[k].values.push_back(v.first);
+    res->cells[k].seconds += v.second;
+  }
+  res->global_sim3.push_back(drift.global.errors.all.mean);
+  res->drift.push_back(drift);
+  res->sim_seconds += sim_s;
+  if (first_seed) {
+    res->plot_centres = plot;
+    res->plot_gt = s.gt_center_w;
+    res->plot_anchors = anchors;
+    res->keyframes = static_cast<int>(s.map.keyframes.size());
+    res->points = static_cast<int>(s.map.points.size());
+    res->correspondences_100 = corr100;
+  }
+}
+
+std::vector<Eigen::Vector2d> xy(const std::vector<Eigen::Vector3d>& p) {
+  std::vector<Eigen::Vector2d> out;
+  for (const auto& q : p) out.push_back(q.head<2>());
+  return out;
+}
+
+}  // namespace
+
+int run_experiment(int argc, char** argv) {
+  const Args args(argc, argv, {"sequences", "intervals", "seeds", "data-dir", "threads", "out"},
+                  {"help", "force"});
+  if (args.flag("help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  std::vector<std::string> seqs;
+  {
+    std::stringstream ss(args.get("sequences", "02,08"));
+    std::string t;
+    while (std::getline(ss, t, ',')) {
+      if (t != "02" && t != "08")
+        throw UsageError("--sequences: '" + t + "' is not 02 or 08 (the paper's sequences)");
+      seqs.push_back(t);
+    }
+  }
+  std::vector<int> intervals;
+  for (double v : parse_number_list("intervals", args.get("intervals", "100,200,300,400,500")))
+    intervals.push_back(static_cast<int>(v));
+  for (int n : intervals)
+    if (n < 1) throw UsageError("--intervals: every interval must be >= 1 frame");
+  std::vector<unsigned> seeds;
+  for (double v : parse_number_list("seeds", args.get("seeds", "1,2,3,4,5")))
+    seeds.push_back(static_cast<unsigned>(v));
+  if (seeds.empty() || intervals.empty() || seqs.empty())
+    throw UsageError("--sequences, --intervals and --seeds must not be empty");
+  const int threads = static_cast<int>(args.get_int("threads", 2));
+  if (threads < 1 || threads > 2) throw UsageError("--threads must be 1 or 2");
+  const std::string data = args.get("data-dir", "data/kitti");
+  StagedOutput out(args.required("out"), args.flag("force"));
+
+  int plot_interval = intervals.front();
+  for (int n : intervals)
+    if (std::abs(n - 300) < std::abs(plot_interval - 300)) plot_interval = n;
+
+  const auto t_start = std::chrono::steady_clock::now();
+  std::map<std::string, SeqResult> results;
+  std::mutex mu;
+  int done = 0;
+  const int total = static_cast<int>(seqs.size() * seeds.size() * intervals.size());
+  for (const std::string& name : seqs) {
+    const std::string calib = data + (name == "02" ? "/calib_seq00-02.txt" : "/calib_seq04-12.txt");
+    const sim::KittiSequence seq = sim::load_kitti_sequence(data + "/poses/" + name + ".txt", calib,
+                                                            data + "/times/" + name + ".txt");
+    SeqResult& res = results[name];
+    for (std::size_t k = 0; k < seeds.size(); k += threads) {
+      std::vector<std::thread> pool;
+      for (int t = 0; t < threads && k + t < seeds.size(); ++t)
+        pool.emplace_back(run_seed, std::cref(seq), std::cref(name), seeds[k + t],
+                          std::cref(intervals), plot_interval, k + t == 0, &res, &mu, &done, total);
+      for (auto& th : pool) th.join();
+    }
+  }
+  if (stderr_is_tty()) std::fputs("\n", stderr);
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+
+  // ---- RESULTS.md --------------------------------------------------------------------------
+  std::ostringstream md;
+  std::string cmd = "geodrift experiment";
+  for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];
+  md << "# KITTI scale-drift correction (the paper's Table 2, on the simulator)\n\n"
+     << "Generated by geodrift " << kVersion << " with:\n\n    " << cmd << "\n\n"
+     << "Mean 2D error [m] between corrected and true keyframe positions over ALL keyframes, "
+        "after the last correspondence (DESIGN.md \"Evaluation\"); each cell is mean ± sd over "
+        "seeds "
+     << args.get("seeds", "1,2,3,4,5")
+     << ". The drift is simulated (issue 4: `sim::simulate` with its committed defaults, "
+        "calibrated on the uncorrected path only); geo views are the right camera at its true "
+        "pose, localized by PnP + LM in the drifted map; INIT anchors at frames 50, 100, 150, "
+        "200, then every N frames. Paper = Iwami et al., Table 2 and Sec. 4.3 (ORB-SLAM on the "
+        "real sequences). Lat/lon outputs use the assumed KITTI origin "
+        "(49.0110 N, 8.4170 E, 160 m).\n\n";
+  for (const std::string& name : seqs) {
+    const SeqResult& r = results.at(name);
+    md << "## Sequence " << name << "\n\n| method |";
+    for (int n : intervals) md << " " << n << " |";
+    md << " paper (100..500) |\n|---|";
+    for (std::size_t i = 0; i < intervals.size(); ++i) md << "---|";
+    md << "---|\n";
+    for (int m = 0; m < kNumMethods; ++m) {
+      md << "| " << kMethods[m].name << " |";
+      for (std::size_t i = 0; i < intervals.size(); ++i)
+        md << " " << fmt_cell(r.cells.at({m, static_cast<int>(i)})) << " |";
+      std::ostringstream p;
+      for (double v : paper_row(name, kMethods[m].name)) p << v << " ";
+      md << " " << (p.str().empty() ? "—" : p.str()) << "|\n";
+    }
+    char g[128];
+    std::snprintf(g, sizeof g, "%.2f ± %.2f", mean(r.global_sim3), sd(r.global_sim3));
+    md << "| Global Sim3 of the uncorrected path |";
+    for (std::size_t i = 0; i < intervals.size(); ++i) md << " " << g << " |";
+    md << " " << sim::paper_global_sim3_error_m(name) << " |\n\n";
+    md << "Correction time (all correspondences of one sequence, summed over seeds) [s]: ";
+    for (int m = 0; m < kNumMethods; ++m) {
+      md << kMethods[m].name << ":";
+      for (std::size_t i = 0; i < intervals.size(); ++i) {
+        char b[32];
+        std::snprintf(
+            b, sizeof b, " %.2f",
+            r.cells.at({m, static_cast<int>(i)}).seconds / static_cast<double>(seeds.size()));
+        md << b;
+      }
+      md << (m + 1 < kNumMethods ? "; " : " (per seed, by interval)\n\n");
+    }
+    md << "Simulated drift (50-frame windows, normalised scale; a real monocular VO on KITTI: "
+          "range about 0.87–1.24, sd ≈ 0.08, steps sd ≈ 0.07):\n\n"
+       << "| seed | global Sim3 error [m] | scale min | scale max | sd | step sd |\n"
+       << "|---|---|---|---|---|---|\n";
+    for (std::size_t k = 0; k < r.drift.size(); ++k) {
+      const auto& d = r.drift[k];
+      char b[160];
+      std::snprintf(b, sizeof b, "| %zu | %.2f | %.3f | %.3f | %.3f | %.3f |\n", k + 1,
+                    d.global.errors.all.mean, d.scale.min, d.scale.max, d.scale.sd,
+                    d.scale.step_sd);
+      md << b;
+    }
+    md << "\n"
+       << r.keyframes << " keyframes, " << r.points << " map points (first seed); "
+       << "plots for interval " << plot_interval << ", first seed: [scale_" << name
+       << ".svg](scale_" << name << ".svg), [topview_" << name << ".svg](topview_" << name
+       << ".svg).\n\n";
+
+    // Plots (first seed).
+    const std::string note = "W = UTM 32N shifted to the KITTI frame-0 origin (assumed)";
+    std::vector<io::SvgSeries> top;
+    const char* colors[] = {"#999999", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd"};
+    top.push_back(io::SvgSeries{"ground truth", "#000000", 2.0, xy(r.plot_gt), false});
+    std::vector<io::SvgSeries> scale;
+    for (int m = 0; m < kNumMethods; ++m) {
+      if (r.plot_centres[m].empty()) continue;
+      top.push_back(io::SvgSeries{kMethods[m].name, colors[m], 1.2, xy(r.plot_centres[m]), m == 0});
+      std::vector<Eigen::Vector2d> pts;
+      for (const auto& sample : eval::scale_factor_along_path(r.plot_centres[m], r.plot_gt))
+        pts.push_back({static_cast<double>(sample.index), sample.factor});
+      if (m == 0 || m == 3) scale.push_back(io::SvgSeries{kMethods[m].name, colors[m], 1.2, pts});
+    }
+    std::vector<io::SvgMarker> marks;
+    for (const auto& a : r.plot_anchors) marks.push_back(io::SvgMarker{"anchor", a.head<2>()});
+    io::write_svg_topview(out.path("topview_" + name + ".svg"), top, marks,
+                          "KITTI " + name + ", interval " + std::to_string(plot_interval) +
+                              " (simulated drift, seed " + std::to_string(seeds.front()) + ")",
+                          note);
+    io::write_svg_line_plot(out.path("scale_" + name + ".svg"), scale,
+                            "Scale factor along KITTI " + name +
+                                " (window 10 keyframes), interval " + std::to_string(plot_interval),
+                            "keyframe", "corrected / true distance", note, 1.0);
+  }
+  char tb[256];
+  std::snprintf(tb, sizeof tb,
+                "Runtime: %.1f s wall clock on %d thread(s) for %d simulated sequences x %zu "
+                "intervals x %d methods.\n",
+                wall, threads, static_cast<int>(seqs.size() * seeds.size()), intervals.size(),
+                kNumMethods);
+  md << tb;
+  {
+    std::ofstream f(out.path("RESULTS.md"));
+    f << md.str();
+    if (!f) throw Error("cannot write " + out.path("RESULTS.md"));
+  }
+  out.commit();
+  std::fputs(md.str().c_str(), stdout);
+  return 0;
+}
+
+}  // namespace geodrift::cli
