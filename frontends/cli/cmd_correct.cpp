@@ -388,6 +388,24 @@ int run_correct(int argc, char** argv) {
                             "frame: " + note + "; units: metres (x), ratio (y)", 1.0);
   }
   {
+    // Metrics without ground truth: distance of each used anchor's corrected view centre from
+    // its geo-tag (3D and horizontal).
+    std::string residuals;
+    {
+      double sum = 0, sum_h = 0, mx = 0;
+      const int nc = static_cast<int>(corrector.correspondences().size());
+      for (int c = 0; c < nc; ++c) {
+        const Eigen::Vector3d d = corrector.view_center_w(c) - corrector.correspondences()[c].y_w;
+        sum += d.norm();
+        sum_h += d.head<2>().norm();
+        mx = std::max(mx, d.norm());
+      }
+      std::ostringstream r;
+      r << "{\"count\": " << nc << ", \"mean_3d\": " << json_num(nc ? sum / nc : NAN)
+        << ", \"mean_2d\": " << json_num(nc ? sum_h / nc : NAN) << ", \"max_3d\": " << json_num(mx)
+        << "}";
+      residuals = r.str();
+    }
     std::ostringstream j;
     const auto& ir = corrector.init_result();
     j << "{\n  \"geodrift_version\": " << io::detail::json_string(kVersion)
@@ -415,6 +433,7 @@ int run_correct(int argc, char** argv) {
       << ", \"scale_m_units_per_metre\": " << json_num(1.0 / ir.S_wm.scale())
       << ", \"rms_m\": " << json_num(ir.rms_m) << ", \"inliers\": " << ir.inliers.size()
       << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
+      << ",\n  \"anchor_residuals_m\": " << residuals
       << ",\n  \"last_anchor_frame\": " << traj.poses[last_anchor_index].frame
       << ",\n  \"steps\": [";
     const auto& reps = corrector.reports();

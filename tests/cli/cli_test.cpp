@@ -252,6 +252,28 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(fs::exists(t.path("ours/") + f));
   CHECK_FALSE(fs::exists(t.path("traj/points.ply")));
 
+  // A NaN in the map is named by file and line, and nothing is written.
+  fs::copy(t.path("sim/colmap"), t.path("badmap"));
+  {
+    std::ifstream is(t.path("badmap/points3D.txt"));
+    std::vector<std::string> lines;
+    std::string l;
+    while (std::getline(is, l)) lines.push_back(l);
+    is.close();
+    std::size_t k = 0;
+    while (k < lines.size() && (lines[k].empty() || lines[k][0] == '#')) ++k;
+    REQUIRE(k + 1 < lines.size());
+    const std::size_t x0 = lines[k + 1].find(' ') + 1, x1 = lines[k + 1].find(' ', x0);
+    lines[k + 1].replace(x0, x1 - x0, "nan");  // the second point's X := nan
+    std::ofstream os(t.path("badmap/points3D.txt"));
+    for (const auto& x : lines) os << x << "\n";
+    const Run bad = run("correct " + in + " --map " + t.path("badmap") + " --out " + t.path("bad"));
+    INFO(bad.output);
+    CHECK(bad.code != 0);
+    CHECK(bad.output.find("points3D.txt:" + std::to_string(k + 2)) != std::string::npos);
+    CHECK(no_outputs(t, "bad"));
+  }
+
   // Every input frame appears; with --keyframe-step the others are interpolated.
   const Run c = run("correct " + in + " --keyframe-step 3 --out " + t.path("step"));
   INFO(c.output);
