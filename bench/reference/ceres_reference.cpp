@@ -2,7 +2,8 @@
 // `final_cost` line tests/solver_data compares our solver against. Built by the standalone
 // CMake project in this folder (bench/reference/regenerate.sh), only where Ceres is installed.
 //
-// usage: ceres_reference <graph.g2o> [threads] [max_iterations]
+// usage: ceres_reference <graph.g2o> [threads] [max_iterations] [tolerance]
+// (function, gradient and parameter tolerance; default 1e-14)
 #include <ceres/ceres.h>
 
 #include <chrono>
@@ -33,14 +34,14 @@ int main(int argc, char** argv) {
     namespace gb = geodrift::bench;
     const int threads = argc > 2 ? std::atoi(argv[2]) : 1;
     const int max_iterations = argc > 3 ? std::atoi(argv[3]) : 200;
+    const double tolerance = argc > 4 ? std::atof(argv[4]) : 1e-14;
     const geodrift::io::G2oPoseGraph3D g = geodrift::io::read_g2o_se3(argv[1]);
     const std::vector<gb::ref::SE3> start = gb::initial_states_T_iw(g);
     gb::CeresSE3Graph problem(g, start);
     // Tight tolerances: the final cost is the optimum the tests compare against, not a
     // benchmark stopping rule.
     const ceres::Solver::Options options =
-        gb::ceres_pose_graph_options(threads, max_iterations, /*function_tolerance=*/1e-14,
-                                     /*gradient_tolerance=*/1e-14, /*parameter_tolerance=*/1e-14);
+        gb::ceres_pose_graph_options(threads, max_iterations, tolerance, tolerance, tolerance);
     ceres::Solver::Summary summary;
     const auto t0 = std::chrono::steady_clock::now();
     ceres::Solve(options, problem.problem.get(), &summary);
@@ -56,9 +57,9 @@ int main(int argc, char** argv) {
         "# states T_iw (world->body) = inverse g2o vertex poses; r = L log(Z_ij^-1 T_i T_j^-1)\n"
         "# in (omega, nu) order, L = sqrt of g2o information reordered to (omega, nu)\n"
         "# (nearest PSD where indefinite); cost = 1/2 sum |r|^2; first vertex fixed;\n"
-        "# LM, SPARSE_NORMAL_CHOLESKY, SUITE_SPARSE, analytic Jacobians, tolerances 1e-14,\n"
+        "# LM, SPARSE_NORMAL_CHOLESKY, SUITE_SPARSE, analytic Jacobians, tolerances %g,\n"
         "# max %d iterations, start = the file's vertex values.\n",
-        max_iterations);
+        tolerance, max_iterations);
     std::printf("graph %s\n", base_name(argv[1]).c_str());
     std::printf("vertices %zu\nedges %zu\nindefinite_information %d\n", g.vertices.size(),
                 g.edges.size(), g.num_indefinite_information);

@@ -91,9 +91,10 @@ inline BaData make_synthetic_ba(int cameras, int points, int obs_per_point, unsi
   return d;
 }
 
-/// KITTI 00 from GTSAM's VO files in `dir` (…/gtsam_examples_data/): 77 poses, 15,638 points,
-/// 52,544 left observations. Start: poses 2.. perturbed by N(0, 0.5°) and N(0, 0.2 m) per axis;
-/// points = first observation's camera-frame point through the perturbed pose.
+/// KITTI 00 from GTSAM's VO files in `dir` (…/gtsam_examples_data/): 77 poses, left
+/// observations. Start: poses 2.. perturbed by N(0, 0.5°) and N(0, 0.2 m) per axis;
+/// points = first observation's camera-frame point through the perturbed pose. Landmarks with
+/// fewer than 3 observations are dropped (monocular depth undetermined / barely determined).
 inline BaData make_kitti_ba(const std::string& dir, unsigned seed) {
   const io::VoCalibration K = io::read_vo_calibration(dir + "/VO_calibration00s.txt");
   const std::vector<io::VoCameraPose> poses =
@@ -121,8 +122,12 @@ inline BaData make_kitti_ba(const std::string& dir, unsigned seed) {
     }
     d.poses.push_back(T);
   }
+  // Landmarks seen fewer than 3 times are dropped (one observation leaves the depth free).
+  std::map<int, int> count;
+  for (const io::VoStereoObservation& o : obs) ++count[o.landmark];
   std::map<int, int> point_index;
   for (const io::VoStereoObservation& o : obs) {
+    if (count[o.landmark] < 3) continue;
     const int c = pose_index.at(o.camera);
     auto it = point_index.find(o.landmark);
     if (it == point_index.end()) {

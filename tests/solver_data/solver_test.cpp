@@ -152,7 +152,7 @@ struct BaResult {
 /// tiny relative decrease can happen before the optimum on a weakly curved problem), so every
 /// path stops on the gradient or the step size.
 BaResult solve_ba(const BaProblem& ba, solver::LinearSolverType type, int max_iterations,
-                  bool with_gradient_bound = false) {
+                  bool with_gradient_bound = false, double function_tolerance = 0.0) {
   BaResult out;
   out.poses = ba.poses;
   out.points = ba.points;
@@ -174,7 +174,7 @@ BaResult solve_ba(const BaProblem& ba, solver::LinearSolverType type, int max_it
   solver::Options options;
   options.linear_solver = type;
   options.max_iterations = max_iterations;
-  options.function_tolerance = 0.0;
+  options.function_tolerance = function_tolerance;
   options.gradient_tolerance = 1e-12;
   options.parameter_tolerance = 1e-14;
   solver::LevenbergMarquardt lm(options);
@@ -211,7 +211,8 @@ void max_differences(const BaResult& a, const BaResult& b, double* pose, double*
 /// KITTI 00 (GTSAM's VO_*00s files): 77 poses, left observations only. The start is the
 /// file's poses perturbed with seeded noise (0.5 deg, 0.2 m) and landmarks from the first
 /// observation's camera-frame point through the perturbed pose. Cameras 0 and 1 are fixed
-/// (monocular gauge: 6 dof + scale). `max_landmarks` keeps the first landmarks (by id) only.
+/// (monocular gauge: 6 dof + scale). `max_landmarks` keeps the first landmarks (by id) only;
+/// landmarks with fewer than 3 observations are dropped.
 BaProblem kitti_ba(int max_landmarks) {
   const std::string dir = std::string(GEODRIFT_DATA_DIR) + "/gtsam_examples_data/";
   const io::VoCalibration K = io::read_vo_calibration(dir + "VO_calibration00s.txt");
@@ -234,9 +235,14 @@ BaProblem kitti_ba(int max_landmarks) {
     }
     ba.poses.push_back(T);
   }
+  // Landmarks seen fewer than 3 times are dropped: with one observation the depth is not
+  // determined at all (a singular 3x3 point block that drifts to 1e5 m), with two it is
+  // barely determined for far points.
+  std::map<int, int> count;
+  for (const io::VoStereoObservation& o : obs) ++count[o.landmark];
   std::map<int, int> point_index;
   for (const io::VoStereoObservation& o : obs) {
-    if (o.landmark >= max_landmarks) continue;
+    if (o.landmark >= max_landmarks || count[o.landmark] < 3) continue;
     const int c = pose_index.at(o.camera);
     auto it = point_index.find(o.landmark);
     if (it == point_index.end()) {
@@ -280,9 +286,11 @@ TEST_CASE("KITTI 00 BA: Schur, plain sparse and dense reduced camera system agre
   const BaProblem ba = kitti_ba(reduced() ? 3000 : 1 << 30);
   INFO(ba.poses.size() << " poses, " << ba.points.size() << " points, " << ba.observations.size()
                        << " observations");
-  const BaResult schur = solve_ba(ba, solver::LinearSolverType::kSchur, 100);
-  const BaResult plain = solve_ba(ba, solver::LinearSolverType::kCholmod, 100);
-  const BaResult dense_rcs = solve_ba(ba, solver::LinearSolverType::kSchurDense, 100);
+  // 52k real observations: the last digits of the cost creep down for many iterations (far
+  // landmarks with weak depth), so the three paths stop on a relative decrease of 1e-10.
+  const BaResult schur = solve_ba(ba, solver::LinearSolverType::kSchur, 300, false, 1e-10);
+  const BaResult plain = solve_ba(ba, solver::LinearSolverType::kCholmod, 300, false, 1e-10);
+  const BaResult dense_rcs = solve_ba(ba, solver::LinearSolverType::kSchurDense, 300, false, 1e-10);
   INFO("schur: " << schur.summary.brief_report());
   INFO("plain: " << plain.summary.brief_report());
   INFO("dense RCS: " << dense_rcs.summary.brief_report());
@@ -295,13 +303,37 @@ TEST_CASE("KITTI 00 BA: Schur, plain sparse and dense reduced camera system agre
   CHECK(std::sqrt(2.0 * schur.summary.final_cost / ba.observations.size()) < 3.0);
   CHECK(plain.summary.final_cost == Approx(schur.summary.final_cost).epsilon(1e-9));
   CHECK(dense_rcs.summary.final_cost == Approx(schur.summary.final_cost).epsilon(1e-9));
-  double dpose = 0, dpoint = 0;
-  max_differences(schur, plain, &dpose, &dpoint);
-  CHECK(dpose < 1e-6);
-  CHECK(dpoint < 1e-4);  // metres; far landmarks are weakly constrained in depth
-  max_differences(schur, dense_rcs, &dpose, &dpoint);
-  CHECK(dpose < 1e-6);
-  CHECK(dpoint < 1e-4);
+  // Poses agree to rounding. Points are compared as seen from their first observing camera
+  // (bearing and inverse depth): landmarks without parallax (far background) keep lowering the
+  // cost as they recede, so their depth is not determined and their metric position is
+  // meaningless (some end up ~1e5 m away), while bearing and inverse depth are.
+  std::vector<int> first_camera(ba.points.size(), -1);
+  for (const BaProblem::Obs& o : ba.observations) {
+    if (first_camera[static_cast<std::size_t>(o.point)] < 0) {
+      first_camera[static_cast<std::size_t>(o.point)] = o.camera;
+    }
+  }
+  const auto compare = [&](const BaResult& a, const BaResult& b, const char* what) {
+    double dpose = 0, dpoint = 0;
+    max_differences(a, b, &dpose, &dpoint);
+    double dbearing = 0.0, dinv_depth = 0.0;
+    int far = 0;
+    for (std::size_t k = 0; k < ba.points.size(); ++k) {
+      const std::size_t c = static_cast<std::size_t>(first_camera[k]);
+      const Eigen::Vector3d pa = a.poses[c].act(a.points[k]), pb = b.poses[c].act(b.points[k]);
+      dbearing = std::max(dbearing, (pa.normalized() - pb.normalized()).norm());
+      dinv_depth = std::max(dinv_depth, std::abs(1.0 / pa.norm() - 1.0 / pb.norm()));
+      if (pa.norm() > 1000.0) ++far;
+    }
+    INFO(what << ": max pose difference " << dpose << ", point " << dpoint << " m, bearing "
+              << dbearing << " rad, inverse depth " << dinv_depth << " 1/m; " << far
+              << " points beyond 1 km");
+    CHECK(dpose < 1e-9);
+    CHECK(dbearing < 1e-9);
+    CHECK(dinv_depth < 1e-9);
+  };
+  compare(schur, plain, "Schur vs plain sparse");
+  compare(schur, dense_rcs, "Schur vs dense reduced camera system");
 }
 
 TEST_CASE("Tiny BAL subsets: Schur, plain sparse and dense solves agree",
