@@ -52,7 +52,10 @@ options
   --origin LAT,LON,H  origin of W (degrees, degrees, ellipsoidal metres); default: first anchor
   --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
                       always one); the others are carried along by their raw relative pose
-  --links N           without --map: link each keyframe to its N predecessors (default 5)
+  --links N           link each keyframe to its N predecessors by relative-pose edges
+                      (default 1, the consecutive chain; measured on simulated KITTI 02 without
+                      a map: 1 link 1.3 m, 2 links 1.9 m, 5 links 9.0 m mean 2D error, as each
+                      edge carries the paper's weight 1e5 and stiffens the graph against anchors)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --help              this text
@@ -168,7 +171,7 @@ int run_correct(int argc, char** argv) {
     throw UsageError(
         "--keyframe-step applies without --map only (the map's images are the "
         "keyframes)");
-  const long long links = args.get_int("links", with_map ? 1 : 5);
+  const long long links = args.get_int("links", 1);
   if (links < 1 || links > 100) throw UsageError("--links must be in [1, 100]");
   if (!with_map && opt.mode == correction::Mode::kInitBa)
     throw UsageError("--mode init+ba needs --map (bundle adjustment needs map points)");
