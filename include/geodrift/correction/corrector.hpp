@@ -268,6 +268,11 @@ class Corrector {
     const auto it = kf_index_.find(id);
     return it == kf_index_.end() ? -1 : it->second;
   }
+  /// Index of map point `id` in insertion order, or -1.
+  int point_index(int id) const {
+    const auto it = pt_index_.find(id);
+    return it == pt_index_.end() ? -1 : it->second;
+  }
   /// Camera centre in W of correspondence j's geo view, as currently corrected.
   Eigen::Vector3d view_center_w(int j) const {
     const auto& c = corr_.at(j);
