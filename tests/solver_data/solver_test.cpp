@@ -63,8 +63,27 @@ double ceres_reference_value(const std::string& graph, const std::string& key) {
   return 0.0;
 }
 
+/// Ceres' cost after iteration k (the committed `trace k cost ...` lines).
+double ceres_trace_cost(const std::string& graph, int k) {
+  const std::string path =
+      std::string(GEODRIFT_SOURCE_DIR) + "/bench/reference/ceres_" + graph + ".txt";
+  std::ifstream in(path);
+  REQUIRE(in.is_open());
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream is(line);
+    std::string tag;
+    int it = -1;
+    double cost = 0.0;
+    if (is >> tag >> it >> cost && tag == "trace" && it == k) return cost;
+  }
+  FAIL("no 'trace " << k << "' line in " << path);
+  return 0.0;
+}
+
 /// Solves a g2o graph with our solver exactly as the Ceres twin does (bench/reference).
-solver::Summary solve_g2o(const std::string& graph, double* final_cost_recomputed) {
+solver::Summary solve_g2o(const std::string& graph, double* final_cost_recomputed,
+                          int max_iterations = 200) {
   const io::G2oPoseGraph3D g =
       io::read_g2o_se3(std::string(GEODRIFT_DATA_DIR) + "/pose_graphs_g2o/" + graph + ".g2o");
   std::vector<lie::SE3d> T(g.vertices.size());
@@ -80,7 +99,7 @@ solver::Summary solve_g2o(const std::string& graph, double* final_cost_recompute
   }
   problem.set_constant(&T[0]);
   solver::Options options;
-  options.max_iterations = 200;
+  options.max_iterations = max_iterations;
   options.function_tolerance = 1e-12;
   options.gradient_tolerance = 1e-12;
   options.parameter_tolerance = 1e-12;
@@ -115,14 +134,35 @@ TEST_CASE("parking-garage reaches Ceres' final cost from the file's initial valu
   check_graph_against_ceres("parking-garage");
 }
 
+/// Reduced form (CI): 20 iterations only; our cost must then be at least as far down as
+/// Ceres' after 20 iterations (within 1 %) and not below Ceres' optimum.
+void check_graph_progress_against_ceres(const std::string& graph) {
+  constexpr int kIterations = 20;
+  double recomputed = 0.0;
+  const solver::Summary s = solve_g2o(graph, &recomputed, kIterations);
+  INFO(graph << " (reduced, " << kIterations << " iterations): " << s.brief_report());
+  CHECK(s.initial_cost == Approx(ceres_reference_value(graph, "initial_cost")).epsilon(1e-12));
+  CHECK(s.final_cost <= 1.01 * ceres_trace_cost(graph, kIterations));
+  CHECK(s.final_cost >= (1.0 - 1e-6) * ceres_reference_value(graph, "final_cost"));
+}
+
 TEST_CASE("torus3D reaches Ceres' final cost from the file's initial values",
           "[solver_data][g2o][data][slow]") {
-  check_graph_against_ceres("torus3D");
+  // ~100-200 linearly converging iterations on 5000 poses: reduced runs check the first 20.
+  if (reduced()) {
+    check_graph_progress_against_ceres("torus3D");
+  } else {
+    check_graph_against_ceres("torus3D");
+  }
 }
 
 TEST_CASE("cubicle reaches Ceres' final cost from the file's initial values",
           "[solver_data][g2o][data][slow]") {
-  check_graph_against_ceres("cubicle");
+  if (reduced()) {
+    check_graph_progress_against_ceres("cubicle");
+  } else {
+    check_graph_against_ceres("cubicle");
+  }
 }
 
 namespace {
@@ -211,9 +251,10 @@ void max_differences(const BaResult& a, const BaResult& b, double* pose, double*
 /// KITTI 00 (GTSAM's VO_*00s files): 77 poses, left observations only. The start is the
 /// file's poses perturbed with seeded noise (0.5 deg, 0.2 m) and landmarks from the first
 /// observation's camera-frame point through the perturbed pose. Cameras 0 and 1 are fixed
-/// (monocular gauge: 6 dof + scale). `max_landmarks` keeps the first landmarks (by id) only;
+/// (monocular gauge: 6 dof + scale). `landmark_stride` keeps every n-th landmark id (all
+/// cameras stay constrained);
 /// landmarks with fewer than 3 observations are dropped.
-BaProblem kitti_ba(int max_landmarks) {
+BaProblem kitti_ba(int landmark_stride) {
   const std::string dir = std::string(GEODRIFT_DATA_DIR) + "/gtsam_examples_data/";
   const io::VoCalibration K = io::read_vo_calibration(dir + "VO_calibration00s.txt");
   const std::vector<io::VoCameraPose> poses =
@@ -242,7 +283,7 @@ BaProblem kitti_ba(int max_landmarks) {
   for (const io::VoStereoObservation& o : obs) ++count[o.landmark];
   std::map<int, int> point_index;
   for (const io::VoStereoObservation& o : obs) {
-    if (o.landmark >= max_landmarks || count[o.landmark] < 3) continue;
+    if (o.landmark % landmark_stride != 0 || count[o.landmark] < 3) continue;
     const int c = pose_index.at(o.camera);
     auto it = point_index.find(o.landmark);
     if (it == point_index.end()) {
@@ -281,9 +322,9 @@ BaProblem bal_ba(const std::string& file) {
 
 TEST_CASE("KITTI 00 BA: Schur, plain sparse and dense reduced camera system agree",
           "[solver_data][ba][data][slow]") {
-  // The full problem (15,638 landmarks, 52,544 observations) takes a few seconds per path;
-  // reduced runs keep the first 3,000 landmarks.
-  const BaProblem ba = kitti_ba(reduced() ? 3000 : 1 << 30);
+  // The full problem (8,069 landmarks seen >= 3 times, 37,406 observations) takes ~20 s for
+  // the three paths; reduced runs keep every 3rd landmark.
+  const BaProblem ba = kitti_ba(reduced() ? 3 : 1);
   INFO(ba.poses.size() << " poses, " << ba.points.size() << " points, " << ba.observations.size()
                        << " observations");
   // 52k real observations: the last digits of the cost creep down for many iterations (far
