@@ -363,8 +363,14 @@ TEST_CASE("KITTI 00 BA: Schur, plain sparse and dense reduced camera system agre
       const std::size_t c = static_cast<std::size_t>(first_camera[k]);
       const Eigen::Vector3d pa = a.poses[c].act(a.points[k]), pb = b.poses[c].act(b.points[k]);
       dbearing = std::max(dbearing, (pa.normalized() - pb.normalized()).norm());
+      // Beyond 1 km (no parallax over the 77 poses) the cost is flat in inverse depth to the
+      // function tolerance, so the stopping point of each path differs there (a point at
+      // 1e7 m: 1.6e-9 1/m in the reduced run); those points are compared by bearing only.
+      if (pa.norm() > 1000.0 || pb.norm() > 1000.0) {
+        ++far;
+        continue;
+      }
       dinv_depth = std::max(dinv_depth, std::abs(1.0 / pa.norm() - 1.0 / pb.norm()));
-      if (pa.norm() > 1000.0) ++far;
     }
     INFO(what << ": max pose difference " << dpose << ", point " << dpoint << " m, bearing "
               << dbearing << " rad, inverse depth " << dinv_depth << " 1/m; " << far
