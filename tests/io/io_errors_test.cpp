@@ -10,7 +10,7 @@
 #include "geodrift/io/csv.hpp"
 #include "geodrift/io/ply.hpp"
 #include "geodrift/io/trajectory.hpp"
-#include "io_test_util.hpp"
+#include "support/test_files.hpp"
 
 namespace io = geodrift::io;
 namespace geo = geodrift::geo;

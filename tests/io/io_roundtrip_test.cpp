@@ -21,7 +21,7 @@
 #include "geodrift/io/svg.hpp"
 #include "geodrift/io/trajectory.hpp"
 #include "geodrift/version.hpp"
-#include "io_test_util.hpp"
+#include "support/test_files.hpp"
 
 namespace io = geodrift::io;
 namespace geo = geodrift::geo;

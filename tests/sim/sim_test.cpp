@@ -13,7 +13,7 @@
 #include "geodrift/sim/detail/pnp.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
-#include "io/io_test_util.hpp"  // TempDir, write_text (belongs in tests/support/)
+#include "support/test_files.hpp"
 
 using namespace geodrift;
 

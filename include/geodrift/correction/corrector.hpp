@@ -341,6 +341,16 @@ class Corrector {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
 
+  /// The report of a window step, before it runs.
+  StepReport window_report(const char* kind, int correspondence, int lo, int hi) const {
+    StepReport rep;
+    rep.kind = kind;
+    rep.correspondence = correspondence;
+    rep.window_first_keyframe = kfs_[lo].id;
+    rep.window_last_keyframe = kfs_[hi].id;
+    return rep;
+  }
+
   /// Keyframe index range [lo, hi] of the window spanned by correspondences [first, last].
   std::pair<int, int> window_of(int first, int last, bool whole_path) const {
     if (whole_path) return {0, static_cast<int>(kfs_.size()) - 1};
@@ -382,11 +392,7 @@ class Corrector {
   void run_pgo(int first, int last, bool whole_path = false) {
     const auto t0 = std::chrono::steady_clock::now();
     const auto [lo, hi] = window_of(first, last, whole_path);
-    StepReport rep;
-    rep.kind = "pgo";
-    rep.correspondence = last;
-    rep.window_first_keyframe = kfs_[lo].id;
-    rep.window_last_keyframe = kfs_[hi].id;
+    StepReport rep = window_report("pgo", last, lo, hi);
 
     const int nw = hi - lo + 1;
     std::vector<lie::Sim3d> S(S_.begin() + lo, S_.begin() + hi + 1);  // window nodes
@@ -456,11 +462,7 @@ class Corrector {
   void run_ba(int first, int last, bool whole_path = false) {
     const auto t0 = std::chrono::steady_clock::now();
     const auto [lo, hi] = window_of(first, last, whole_path);
-    StepReport rep;
-    rep.kind = "ba";
-    rep.correspondence = last;
-    rep.window_first_keyframe = kfs_[lo].id;
-    rep.window_last_keyframe = kfs_[hi].id;
+    StepReport rep = window_report("ba", last, lo, hi);
 
     const int nw = hi - lo + 1;
     std::vector<lie::SE3d> T(nw);

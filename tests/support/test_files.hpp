@@ -1,7 +1,7 @@
 #pragma once
 
-// Helpers shared by the io tests: a temporary directory, file writing/reading, random poses and
-// checks on error messages.
+// Helpers shared by the tests (io, sim, ...): a temporary directory, file writing/reading, random
+// poses and checks on error messages.
 
 #include <unistd.h>
 
