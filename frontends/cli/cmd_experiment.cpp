@@ -269,7 +269,7 @@ int run_experiment(int argc, char** argv) {
     md << "| Global Sim3 of the uncorrected path |";
     for (std::size_t i = 0; i < intervals.size(); ++i) md << " " << g << " |";
     md << " " << sim::paper_global_sim3_error_m(name) << " |\n\n";
-    md << "Correction time (all correspondences of one sequence, summed over seeds) [s]: ";
+    md << "Correction time per seed (all correspondences of the whole sequence) [s]: ";
     for (int m = 0; m < kNumMethods; ++m) {
       md << kMethods[m].name << ":";
       for (std::size_t i = 0; i < intervals.size(); ++i) {
@@ -279,7 +279,7 @@ int run_experiment(int argc, char** argv) {
             r.cells.at({m, static_cast<int>(i)}).seconds / static_cast<double>(seeds.size()));
         md << b;
       }
-      md << (m + 1 < kNumMethods ? "; " : " (per seed, by interval)\n\n");
+      md << (m + 1 < kNumMethods ? "; " : " (by interval)\n\n");
     }
     md << "Simulated drift (50-frame windows, normalised scale; a real monocular VO on KITTI: "
           "range about 0.87–1.24, sd ≈ 0.08, steps sd ≈ 0.07):\n\n"
