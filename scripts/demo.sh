@@ -8,6 +8,7 @@ cd "$(dirname "$0")/.."
 scripts/setup.sh "$@"
 build=${GEODRIFT_BUILD_DIR:-build}
 out=out/demo
+mkdir -p "$(dirname "$out")"
 echo "== running: geodrift experiment (reduced) -> $out"
 "$build/frontends/cli/geodrift" experiment --sequences 02 --intervals 100,300 --seeds 1 \
   --out "$out" --force
