@@ -36,10 +36,8 @@ endfunction()
 function(geodrift_test_flags target)
   target_compile_definitions(${target} PRIVATE GEODRIFT_ENABLE_ASSERTS)
   if(GEODRIFT_SANITIZE)
-    # GCC 12's -Wmaybe-uninitialized reports false positives inside Eigen (LLT's move
-    # assignment) once the sanitizers instrument the code; it stays an error in normal builds.
     target_compile_options(${target} PRIVATE -fsanitize=address,undefined
-      -fno-sanitize-recover=all -fno-omit-frame-pointer -Wno-maybe-uninitialized)
+      -fno-sanitize-recover=all -fno-omit-frame-pointer)
     target_link_options(${target} PRIVATE -fsanitize=address,undefined)
   endif()
 endfunction()

@@ -12,13 +12,14 @@
 namespace geodrift::solver {
 
 /// Dense LLᵀ of the full symmetric H (built from its upper triangle). Memory is allocated in
-/// analyze(); factorize()/solve() do not allocate.
+/// analyze(); the first factorize() sizes the factor, later factorize()/solve() do not allocate.
 class DenseSolver final : public LinearSolver {
  public:
   LinearSolverStatus analyze(const BlockStructure& s) override {
     n_ = s.num_cols();
     A_.setZero(n_, n_);
-    llt_ = Eigen::LLT<Eigen::MatrixXd>(n_);
+    // No pre-sized LLT: Eigen's LLT(Index) leaves its `info` member uninitialised, and moving
+    // such an object reads it (UBSan: invalid enum load). compute() sizes it on first use.
     x_.resize(n_);
     message_.clear();
     return LinearSolverStatus::kSuccess;
