@@ -26,14 +26,18 @@ void gradients(const std::vector<float>& img, int w, int h, ScaleLevel* out) {
   out->height = h;
   out->angle.assign(static_cast<std::size_t>(w) * h, 0.0f);
   out->magnitude.assign(static_cast<std::size_t>(w) * h, 0.0f);
+  out->angle_bins.assign(static_cast<std::size_t>(w) * h, 0.0f);
   for (int y = 1; y < h - 1; ++y) {
     for (int x = 1; x < w - 1; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * w + x;
       const double gx = static_cast<double>(img[i + 1]) - img[i - 1];
       const double gy = static_cast<double>(img[i + w]) - img[i - w];
       double a = 0.0;
-      out->angle[i] = orientation(gx, gy, &a) ? static_cast<float>(a) : -1.0f;
-      out->magnitude[i] = static_cast<float>(std::hypot(gx, gy));
+      const bool has = orientation(gx, gy, &a);
+      out->angle[i] = has ? static_cast<float>(a) : -1.0f;
+      // The VLD reads orientations in 24-bin units; 0 where the gradient vanishes (weight 0).
+      out->angle_bins[i] = has ? static_cast<float>(a * (kBinNum / kTwoPi)) : 0.0f;
+      out->magnitude[i] = static_cast<float>(std::sqrt(gx * gx + gy * gy));
     }
   }
 }

@@ -62,43 +62,88 @@ double neighbourhood_range(const ImageScale& s, std::size_t num_features, std::s
   return range_ratio * std::sqrt(3.0 * s.width() * s.height() / (kPi * inlier_rate * n));
 }
 
+/// geometric_consistency with each match's rotation and scale ratio precomputed.
+struct MatchGeometry {
+  double c, s;  // ratio · (cos, sin) of (angle_b − angle_a)
+};
+
+double fast_consistency(const Keypoint& a1, const Keypoint& a2, const Keypoint& b1,
+                        const Keypoint& b2, const MatchGeometry& g1, const MatchGeometry& g2) {
+  const double ax = a1.x - a2.x, ay = a1.y - a2.y;
+  const double bx = b1.x - b2.x, by = b1.y - b2.y;
+  const double nb2 = bx * bx + by * by;
+  const auto err = [&](const MatchGeometry& g) {
+    const double px = g.c * ax - g.s * ay, py = g.s * ax + g.c * ay;
+    const double denom2 = std::min(px * px + py * py, nb2);
+    if (denom2 == 0.0) return std::numeric_limits<double>::infinity();
+    return std::sqrt(((px - bx) * (px - bx) + (py - by) * (py - by)) / denom2);
+  };
+  return std::min(err(g1), err(g2));
+}
+
 Neighbourhood build_neighbourhood(const Problem& p, double range1, double range2) {
   const int n = static_cast<int>(p.M.size());
-  Neighbourhood nb;
-  nb.begin.assign(static_cast<std::size_t>(n) + 1, 0);
-  std::vector<std::vector<int>> rows(static_cast<std::size_t>(n));
+  // Positions gathered once: the O(N²) scan below is the only all-pairs loop of a run.
+  std::vector<double> x1(static_cast<std::size_t>(n)), y1(x1), x2(x1), y2(x1);
+  std::vector<MatchGeometry> geom(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
-    const Keypoint& a1 = p.F1[static_cast<std::size_t>(p.M[static_cast<std::size_t>(i)].i1)];
-    const Keypoint& b1 = p.F2[static_cast<std::size_t>(p.M[static_cast<std::size_t>(i)].i2)];
+    const auto ui = static_cast<std::size_t>(i);
+    const Keypoint& a = p.F1[static_cast<std::size_t>(p.M[ui].i1)];
+    const Keypoint& b = p.F2[static_cast<std::size_t>(p.M[ui].i2)];
+    x1[ui] = a.x;
+    y1[ui] = a.y;
+    x2[ui] = b.x;
+    y2[ui] = b.y;
+    if (p.opt.geometry) {
+      const double ratio = b.scale / a.scale, rot = b.angle - a.angle;
+      geom[ui] = {ratio * std::cos(rot), ratio * std::sin(rot)};
+    }
+  }
+  const double md2 = p.opt.min_dist * p.opt.min_dist;
+  const double r1 = range1 * range1, r2 = range2 * range2;
+  std::vector<int> degree(static_cast<std::size_t>(n), 0);
+  std::vector<std::pair<int, int>> pairs;
+  pairs.reserve(static_cast<std::size_t>(n) * 32);
+  for (int i = 0; i < n; ++i) {
+    const auto ui = static_cast<std::size_t>(i);
     for (int j = i + 1; j < n; ++j) {
-      const Keypoint& a2 = p.F1[static_cast<std::size_t>(p.M[static_cast<std::size_t>(j)].i1)];
-      const Keypoint& b2 = p.F2[static_cast<std::size_t>(p.M[static_cast<std::size_t>(j)].i2)];
-      const double d1 = std::hypot(a1.x - a2.x, a1.y - a2.y);
-      const double d2 = std::hypot(b1.x - b2.x, b1.y - b2.y);
-      if (d1 > p.opt.min_dist && d2 > p.opt.min_dist && (d1 < range1 || d2 < range2)) {
-        rows[static_cast<std::size_t>(i)].push_back(j);
-        rows[static_cast<std::size_t>(j)].push_back(i);
+      const auto uj = static_cast<std::size_t>(j);
+      const double d1x = x1[ui] - x1[uj], d1y = y1[ui] - y1[uj];
+      const double d2x = x2[ui] - x2[uj], d2y = y2[ui] - y2[uj];
+      const double d1 = d1x * d1x + d1y * d1y, d2 = d2x * d2x + d2y * d2y;
+      if (d1 > md2 && d2 > md2 && (d1 < r1 || d2 < r2)) {
+        pairs.emplace_back(i, j);
+        ++degree[ui];
+        ++degree[uj];
       }
     }
   }
-  std::size_t total = 0;
-  for (const auto& r : rows) total += r.size();
-  nb.nbr.reserve(total);
-  nb.geo.reserve(total);
+  Neighbourhood nb;
+  nb.begin.assign(static_cast<std::size_t>(n) + 1, 0);
   for (int i = 0; i < n; ++i) {
-    const Match& mi = p.M[static_cast<std::size_t>(i)];
-    for (int j : rows[static_cast<std::size_t>(i)]) {  // ascending: j < i first, then j > i
-      nb.nbr.push_back(j);
-      float g = std::numeric_limits<float>::infinity();
-      if (p.opt.geometry) {
-        const Match& mj = p.M[static_cast<std::size_t>(j)];
-        g = static_cast<float>(geometric_consistency(
-            p.F1[static_cast<std::size_t>(mi.i1)], p.F1[static_cast<std::size_t>(mj.i1)],
-            p.F2[static_cast<std::size_t>(mi.i2)], p.F2[static_cast<std::size_t>(mj.i2)]));
-      }
-      nb.geo.push_back(g);
+    nb.begin[static_cast<std::size_t>(i) + 1] =
+        nb.begin[static_cast<std::size_t>(i)] + degree[static_cast<std::size_t>(i)];
+  }
+  nb.nbr.resize(pairs.size() * 2);
+  nb.geo.resize(pairs.size() * 2);
+  std::vector<int> fill(nb.begin.begin(), nb.begin.end() - 1);
+  // `pairs` is ordered by (i, j): rows come out sorted ascending (j < i entries are appended
+  // while scanning earlier rows, in increasing order of that row).
+  for (const auto& [i, j] : pairs) {
+    float g = std::numeric_limits<float>::infinity();
+    if (p.opt.geometry) {
+      const auto ui = static_cast<std::size_t>(i), uj = static_cast<std::size_t>(j);
+      g = static_cast<float>(fast_consistency(
+          p.F1[static_cast<std::size_t>(p.M[ui].i1)], p.F1[static_cast<std::size_t>(p.M[uj].i1)],
+          p.F2[static_cast<std::size_t>(p.M[ui].i2)], p.F2[static_cast<std::size_t>(p.M[uj].i2)],
+          geom[ui], geom[uj]));
     }
-    nb.begin[static_cast<std::size_t>(i) + 1] = static_cast<int>(nb.nbr.size());
+    const int ki = fill[static_cast<std::size_t>(i)]++;
+    const int kj = fill[static_cast<std::size_t>(j)]++;
+    nb.nbr[static_cast<std::size_t>(ki)] = j;
+    nb.geo[static_cast<std::size_t>(ki)] = g;
+    nb.nbr[static_cast<std::size_t>(kj)] = i;
+    nb.geo[static_cast<std::size_t>(kj)] = g;
   }
   return nb;
 }
@@ -134,6 +179,8 @@ RunOutput run_once(const Problem& p, double inlier_rate, int K, ConsistencyCache
     return p.F2[static_cast<std::size_t>(p.M[static_cast<std::size_t>(m)].i2)];
   };
 
+  constexpr float kUnknown = -1.0f;
+  std::vector<float> local_e(nb.nbr.size(), kUnknown);
   bool change = true;
   while (change) {
     change = false;
@@ -153,24 +200,29 @@ RunOutput run_once(const Problem& p, double inlier_rate, int K, ConsistencyCache
       for (; k < row_end; ++k) {
         const int j = nb.nbr[static_cast<std::size_t>(k)];
         if (!valid[static_cast<std::size_t>(j)]) continue;
-        const float* cached = E->find(i, j);
-        float e;
-        if (cached) {
-          e = *cached;
-        } else {
-          e = ConsistencyCache::kRejected;
-          if (!opt.geometry || nb.geo[static_cast<std::size_t>(k)] < opt.distance_thres) {
-            const Keypoint& a1 = kp1(i);
-            const Keypoint& a2 = kp1(j);
-            const Keypoint& b1 = kp2(i);
-            const Keypoint& b2 = kp2(j);
-            const Vld v1 = compute_vld(p.s1, a1.x, a1.y, a2.x, a2.y);
-            const Vld v2 = compute_vld(p.s2, b1.x, b1.y, b2.x, b2.y);
-            ++*vld_pairs;
-            const double d = vld_difference(v1, v2, opt.max_contrast);
-            if (d < opt.juge) e = static_cast<float>(d);
+        // Per-run copy of the cache entry: the hash map is consulted once per pair and run.
+        float& e = local_e[static_cast<std::size_t>(k)];
+        if (e == kUnknown) {
+          if (const float* cached = E->find(i, j)) {
+            e = *cached;
+          } else {
+            e = ConsistencyCache::kRejected;
+            if (!opt.geometry || nb.geo[static_cast<std::size_t>(k)] < opt.distance_thres) {
+              const Keypoint& a1 = kp1(i);
+              const Keypoint& a2 = kp1(j);
+              const Keypoint& b1 = kp2(i);
+              const Keypoint& b2 = kp2(j);
+              const Vld v1 = compute_vld(p.s1, a1.x, a1.y, a2.x, a2.y);
+              // An unusable first line makes D = 128 whatever the second one is.
+              if (v1.contrast > 0.0 && v1.contrast <= opt.max_contrast) {
+                const Vld v2 = compute_vld(p.s2, b1.x, b1.y, b2.x, b2.y);
+                ++*vld_pairs;
+                const double d = vld_difference(v1, v2, opt.max_contrast);
+                if (d < opt.juge) e = static_cast<float>(d);
+              }
+            }
+            E->set(i, j, e);
           }
-          E->set(i, j, e);
         }
         if (e >= 0.0f) {
           ++result[static_cast<std::size_t>(i)];

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <vector>
 
 #include "geodrift/error.hpp"
 #include "geodrift/kvld/kvld.hpp"
@@ -12,6 +13,7 @@ namespace {
 constexpr double kTwoPi = 6.283185307179586476925286766559;
 constexpr double kBinsPerRad = kBinNum / kTwoPi;
 constexpr int kRatioBins = kBinNum / kSubdirection;  // 24-bin units per 8-bin unit
+static_assert(kRatioBins == 3, "the descriptor folding below sums three 24-bins per 8-bin");
 static_assert(kBinNum % 2 == 0, "binNum must be even");
 static_assert(kBinNum % kSubdirection == 0, "8-bin index is derived from the 24-bin position");
 }  // namespace
@@ -22,7 +24,7 @@ Vld compute_vld(const ImageScale& scale, double x1, double y1, double x2, double
                                                             << ", " << y2 << ")");
   Vld v;
   const double dx = x2 - x1, dy = y2 - y1;
-  v.length = std::hypot(dx, dy);
+  v.length = std::sqrt(dx * dx + dy * dy);
   // Main angle of the segment in [0, 2π); 0 for a degenerate segment, as the reference.
   double theta = 0.0;
   if (dx != 0.0 || dy != 0.0) {
@@ -39,9 +41,21 @@ Vld compute_vld(const ImageScale& scale, double x1, double y1, double x2, double
   const double inv_s = 1.0 / (4.5 * r2);
   const int w = lv.width, h = lv.height;
 
-  // Separable Gaussian factors: exp(-(dx²+dy²)/s) = exp(-dx²/s)·exp(-dy²/s).
+  // Separable Gaussian factors: exp(-(dx²+dy²)/s) = exp(-dx²/s)·exp(-dy²/s). Small discs
+  // (the usual case) use the stack.
   const int span = static_cast<int>(std::ceil(2.0 * r)) + 2;
-  std::vector<double> ex(static_cast<std::size_t>(span)), ey(static_cast<std::size_t>(span));
+  constexpr int kStack = 96;
+  double ex_stack[kStack];
+  std::vector<double> ex_heap;
+  double* ex = ex_stack;
+  if (span > kStack) {
+    ex_heap.resize(static_cast<std::size_t>(span));
+    ex = ex_heap.data();
+  }
+  float wbuf[kStack];
+  const auto theta_f = static_cast<float>(theta_bins);
+  int bbuf[kStack];
+  const double q = std::exp(-2.0 * inv_s);
   double raw_weight_sum = 0.0;
   for (int i = 0; i < kDimension; ++i) {
     const double t = static_cast<double>(i + 1) / (kDimension + 1);
@@ -52,40 +66,70 @@ Vld compute_vld(const ImageScale& scale, double x1, double y1, double x2, double
     const int xb = std::min(w - 2, static_cast<int>(std::floor(cx + r)));
     const int ya = std::max(1, static_cast<int>(std::ceil(cy - r)));
     const int yb = std::min(h - 2, static_cast<int>(std::floor(cy + r)));
-    double hist[kBinNum] = {};
-    double* desc = v.descriptor.data() + kSubdirection * i;
+    // Accumulators split by x mod 4: neighbouring pixels usually share a bin, and a single
+    // array would serialise the read-modify-write chain through memory.
+    constexpr int kLanes = 4;
+    double hist_l[kLanes][kBinNum] = {};
     if (xa <= xb && ya <= yb) {
-      for (int x = xa; x <= xb; ++x) {
-        const double d = x - cx;
-        ex[static_cast<std::size_t>(x - xa)] = std::exp(-d * d * inv_s);
-      }
-      for (int y = ya; y <= yb; ++y) {
-        const double d = y - cy;
-        ey[static_cast<std::size_t>(y - ya)] = std::exp(-d * d * inv_s);
-      }
-      for (int y = ya; y <= yb; ++y) {
-        const double ddy = y - cy;
-        const double rem = r2 - ddy * ddy;
-        const double gy = ey[static_cast<std::size_t>(y - ya)];
-        const float* ang = lv.angle.data() + static_cast<std::size_t>(y) * w;
-        const float* mag = lv.magnitude.data() + static_cast<std::size_t>(y) * w;
+      // Gaussian factors on the integer grid by the recurrence
+      // e(x+1) = e(x)·g(x), g(x+1) = g(x)·q with g(x) = exp(-(2(x-c)+1)/s), q = exp(-2/s):
+      // three exp() per axis and disc instead of one per column and row.
+      {
+        const double d = xa - cx;
+        double e = std::exp(-d * d * inv_s), g = std::exp(-(2.0 * d + 1.0) * inv_s);
         for (int x = xa; x <= xb; ++x) {
-          const double ddx = x - cx;
-          if (ddx * ddx > rem) continue;  // outside the disc
-          const float m = mag[x];
-          if (m == 0.0f) continue;  // contributes nothing (also the angle == -1 pixels)
-          const double wgt = ex[static_cast<std::size_t>(x - xa)] * gy * m;
-          double rel = ang[x] * kBinsPerRad - theta_bins;  // relative angle in 24-bin units
-          if (rel < 0.0) rel += kBinNum;
-          if (rel >= kBinNum) rel -= kBinNum;
-          int b = static_cast<int>(rel + 0.5);
-          if (b >= kBinNum) b = 0;  // nearest-bin rounding wraps to bin 0
-          hist[b] += wgt;
-          int s = static_cast<int>(rel / kRatioBins + 0.5);
-          if (s >= kSubdirection) s = 0;
-          desc[s] += wgt;
+          ex[x - xa] = e;
+          e *= g;
+          g *= q;
         }
       }
+      const double dy0 = ya - cy;
+      double gy = std::exp(-dy0 * dy0 * inv_s), gstep = std::exp(-(2.0 * dy0 + 1.0) * inv_s);
+      for (int y = ya; y <= yb; ++y, gy *= gstep, gstep *= q) {
+        const double ddy = y - cy;
+        const double rem = r2 - ddy * ddy;
+        if (rem < 0.0) continue;
+        // The disc's chord on this row, {x : (x-cx)² ≤ rem} ∩ [xa, xb]: start from a
+        // conservative bracket and tighten with the exact test (independent of √ rounding).
+        const double half = std::sqrt(rem);
+        int x0 = std::max(xa, static_cast<int>(cx - half));
+        int x1r = std::min(xb, static_cast<int>(cx + half) + 1);
+        while (x0 <= x1r && (x0 - cx) * (x0 - cx) > rem) ++x0;
+        while (x1r >= x0 && (x1r - cx) * (x1r - cx) > rem) --x1r;
+        const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        const float* ang = lv.angle_bins.data() + row;
+        const float* mag = lv.magnitude.data() + row;
+        // Two passes per chord (in chunks for very large discs): the arithmetic, which the
+        // compiler vectorises, then the histogram scatter.
+        for (int c0 = x0; c0 <= x1r; c0 += kStack) {
+          const int len = std::min(kStack, x1r - c0 + 1);
+          const double* exr = ex + (c0 - xa);
+          const float* angr = ang + c0;
+          const float* magr = mag + c0;
+          // Single precision here, as the reference (float orientations and main angle).
+          for (int k = 0; k < len; ++k) {
+            wbuf[k] = static_cast<float>(exr[k] * gy) * magr[k];  // 0 where |∇I| = 0
+            float rel = angr[k] - theta_f;  // relative angle in 24-bin units, (-24, 24)
+            rel += static_cast<float>(kBinNum) * static_cast<float>(rel < 0.0f);  // branch-free
+            const int b = static_cast<int>(rel + 0.5f);
+            bbuf[k] = b - kBinNum * (b >= kBinNum);  // nearest-bin rounding wraps to bin 0
+          }
+          for (int k = 0; k < len; ++k) {
+            hist_l[k & (kLanes - 1)][bbuf[k]] += wbuf[k];
+          }
+        }
+      }
+    }
+    double hist[kBinNum];
+    for (int b = 0; b < kBinNum; ++b) {
+      hist[b] = (hist_l[0][b] + hist_l[1][b]) + (hist_l[2][b] + hist_l[3][b]);
+    }
+    // The 8-bin index is a function of the 24-bin one: round(rel/3) = s exactly when
+    // round(rel) ∈ {3s−1, 3s, 3s+1} (mod 24), so each descriptor bin sums three 24-bins.
+    double* desc = v.descriptor.data() + kSubdirection * i;
+    for (int sb = 0; sb < kSubdirection; ++sb) {
+      const int c = kRatioBins * sb;
+      desc[sb] = hist[(c + kBinNum - 1) % kBinNum] + hist[c] + hist[c + 1];
     }
     // Main orientation: bin maximising the difference with the opposite bin (first on ties).
     constexpr int half = kBinNum / 2;
@@ -134,14 +178,14 @@ double geometric_consistency(const Keypoint& a1, const Keypoint& a2, const Keypo
                              const Keypoint& b2) {
   const double ax = a1.x - a2.x, ay = a1.y - a2.y;
   const double bx = b1.x - b2.x, by = b1.y - b2.y;
-  const double nb = std::hypot(bx, by);
+  const double nb = std::sqrt(bx * bx + by * by);
   const auto error = [&](const Keypoint& a, const Keypoint& b) {
     const double rot = b.angle - a.angle;
     const double s = b.scale / a.scale;
     const double c = std::cos(rot), sn = std::sin(rot);
     const double px = s * (c * ax - sn * ay), py = s * (sn * ax + c * ay);
-    const double denom = std::min(std::hypot(px, py), nb);
-    const double num = std::hypot(px - bx, py - by);
+    const double denom = std::min(std::sqrt(px * px + py * py), nb);
+    const double num = std::sqrt((px - bx) * (px - bx) + (py - by) * (py - by));
     if (denom == 0.0) return std::numeric_limits<double>::infinity();
     return num / denom;
   };

@@ -29,6 +29,10 @@
 
 namespace geodrift::kvld {
 
+inline constexpr int kDimension = 10;    ///< discs per VLD (`dimension`)
+inline constexpr int kSubdirection = 8;  ///< descriptor bins per disc (`subdirection`)
+inline constexpr int kBinNum = 24;       ///< main-orientation bins per disc (`binNum`, even)
+
 // ------------------------------------------------------------------------------------------
 // Scale space
 // ------------------------------------------------------------------------------------------
@@ -46,6 +50,8 @@ struct ScaleLevel {
   /// Gradient magnitude hypot(gx, gy), gx = I(x+1,y) - I(x-1,y), gy = I(x,y+1) - I(x,y-1);
   /// 0 on the border.
   std::vector<float> magnitude;
+  /// Cache for the VLD's inner loop: `angle` · 24/(2π) (0 where the gradient is zero).
+  std::vector<float> angle_bins;
 };
 
 /// Precomputed gradient pyramid of one grayscale image (kvld.md §3.2).
@@ -96,10 +102,6 @@ class ImageScale {
 // ------------------------------------------------------------------------------------------
 // Virtual line descriptor
 // ------------------------------------------------------------------------------------------
-
-inline constexpr int kDimension = 10;    ///< discs per VLD (`dimension`)
-inline constexpr int kSubdirection = 8;  ///< descriptor bins per disc (`subdirection`)
-inline constexpr int kBinNum = 24;       ///< main-orientation bins per disc (`binNum`, even)
 
 /// Virtual line descriptor of the segment P1 → P2 (kvld.md §3.3).
 struct Vld {
