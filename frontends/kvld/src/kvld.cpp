@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <unordered_map>
 
@@ -148,6 +149,52 @@ Neighbourhood build_neighbourhood(const Problem& p, double range1, double range2
   return nb;
 }
 
+/// Pairs (i, j), i < j, that the uniqueness step compares: same keypoint on either side, or
+/// the same position on exactly one side. Fixed for a filter() call; row i lists j ascending.
+std::vector<std::vector<int>> uniqueness_conflicts(const Problem& p) {
+  const int n = static_cast<int>(p.M.size());
+  std::vector<std::vector<int>> out(static_cast<std::size_t>(n));
+  std::unordered_map<int, std::vector<int>> by_i1, by_i2;
+  std::map<std::pair<double, double>, std::vector<int>> by_p1, by_p2;
+  for (int i = 0; i < n; ++i) {
+    const Match& m = p.M[static_cast<std::size_t>(i)];
+    const Keypoint& a = p.F1[static_cast<std::size_t>(m.i1)];
+    const Keypoint& b = p.F2[static_cast<std::size_t>(m.i2)];
+    by_i1[m.i1].push_back(i);
+    by_i2[m.i2].push_back(i);
+    by_p1[{a.x, a.y}].push_back(i);
+    by_p2[{b.x, b.y}].push_back(i);
+  }
+  const auto emit = [&](const std::vector<int>& group) {
+    for (std::size_t a = 0; a < group.size(); ++a)
+      for (std::size_t b = a + 1; b < group.size(); ++b)
+        out[static_cast<std::size_t>(group[a])].push_back(group[b]);  // groups are ascending
+  };
+  for (const auto& g : by_i1) emit(g.second);
+  for (const auto& g : by_i2) emit(g.second);
+  for (const auto& g : by_p1) emit(g.second);
+  for (const auto& g : by_p2) emit(g.second);
+  for (int i = 0; i < n; ++i) {
+    auto& row = out[static_cast<std::size_t>(i)];
+    std::sort(row.begin(), row.end());
+    row.erase(std::unique(row.begin(), row.end()), row.end());
+    const Match& mi = p.M[static_cast<std::size_t>(i)];
+    const Keypoint& a1 = p.F1[static_cast<std::size_t>(mi.i1)];
+    const Keypoint& b1 = p.F2[static_cast<std::size_t>(mi.i2)];
+    row.erase(std::remove_if(row.begin(), row.end(),
+                             [&](int j) {
+                               const Match& mj = p.M[static_cast<std::size_t>(j)];
+                               const Keypoint& a2 = p.F1[static_cast<std::size_t>(mj.i1)];
+                               const Keypoint& b2 = p.F2[static_cast<std::size_t>(mj.i2)];
+                               const bool same1 = a1.x == a2.x && a1.y == a2.y;
+                               const bool same2 = b1.x == b2.x && b1.y == b2.y;
+                               return !(mi.i1 == mj.i1 || mi.i2 == mj.i2 || same1 != same2);
+                             }),
+              row.end());
+  }
+  return out;
+}
+
 struct RunOutput {
   std::vector<char> valid;
   std::vector<double> score;
@@ -155,8 +202,8 @@ struct RunOutput {
 };
 
 /// One K-VLD run (the reference's KVLD()) with the given inlier rate and K.
-RunOutput run_once(const Problem& p, double inlier_rate, int K, ConsistencyCache* E,
-                   std::size_t* vld_pairs) {
+RunOutput run_once(const Problem& p, const std::vector<std::vector<int>>& conflicts,
+                   double inlier_rate, int K, ConsistencyCache* E, std::size_t* vld_pairs) {
   const int n = static_cast<int>(p.M.size());
   const Options& opt = p.opt;
   const double range1 =
@@ -248,17 +295,8 @@ RunOutput run_once(const Problem& p, double inlier_rate, int K, ConsistencyCache
     if (opt.unique_match) {
       for (int i = 0; i + 1 < n; ++i) {
         if (!valid[static_cast<std::size_t>(i)]) continue;
-        const Match& mi = p.M[static_cast<std::size_t>(i)];
-        const Keypoint& a1 = kp1(i);
-        const Keypoint& b1 = kp2(i);
-        for (int j = i + 1; j < n; ++j) {
+        for (int j : conflicts[static_cast<std::size_t>(i)]) {  // ascending, j > i
           if (!valid[static_cast<std::size_t>(j)]) continue;
-          const Match& mj = p.M[static_cast<std::size_t>(j)];
-          const Keypoint& a2 = kp1(j);
-          const Keypoint& b2 = kp2(j);
-          const bool same1 = a1.x == a2.x && a1.y == a2.y;
-          const bool same2 = b1.x == b2.x && b1.y == b2.y;
-          if (!(mi.i1 == mj.i1 || mi.i2 == mj.i2 || same1 != same2)) continue;
           const int ri = result[static_cast<std::size_t>(i)];
           const int rj = result[static_cast<std::size_t>(j)];
           const double si = score[static_cast<std::size_t>(i)];
@@ -401,7 +439,8 @@ Result filter(const ImageScale& scale1, const ImageScale& scale2, const std::vec
   Result res;
   if (putative.empty()) return res;
   const Problem prob{scale1, scale2, F1, F2, putative, options};
-  ConsistencyCache E(putative.size() * 64);
+  ConsistencyCache E(putative.size() * 128);
+  const std::vector<std::vector<int>> conflicts = uniqueness_conflicts(prob);
   double p = options.inlier_rate;
   int K = options.K;
   RunOutput run;
@@ -409,7 +448,7 @@ Result filter(const ImageScale& scale1, const ImageScale& scale2, const std::vec
   // Driver schedule (kvld_filter.cpp): retry with half the inlier rate and K = 2 while the
   // survival ratio stays below the inlier rate, at most max_runs runs in all.
   while (true) {
-    run = run_once(prob, p, K, &E, &res.vld_pairs);
+    run = run_once(prob, conflicts, p, K, &E, &res.vld_pairs);
     ++res.runs;
     kept = static_cast<std::size_t>(std::count(run.valid.begin(), run.valid.end(), 1));
     const double ratio = static_cast<double>(kept) / static_cast<double>(putative.size());
