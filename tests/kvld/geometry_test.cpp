@@ -4,6 +4,7 @@
 #include <limits>
 #include <random>
 
+#include "geodrift/error.hpp"
 #include "geodrift/kvld/kvld.hpp"
 
 namespace kvld = geodrift::kvld;
@@ -84,4 +85,8 @@ TEST_CASE("ORB keypoint angles are converted from degrees to radians", "[kvld][g
   CHECK(k[0].scale == 31.0);
   CHECK(k[0].angle == Approx(kPi / 2).epsilon(1e-12));
   CHECK(std::isnan(k[1].angle));
+  std::vector<cv::KeyPoint> oct{cv::KeyPoint(1, 1, 31, 10)};
+  oct[0].octave = 3;
+  CHECK(kvld::keypoints_from_cv(oct, 1.2)[0].scale == Approx(1.728).epsilon(1e-12));
+  CHECK_THROWS_AS(kvld::keypoints_from_cv(oct, -1.0), geodrift::InvalidArgument);
 }

@@ -418,14 +418,18 @@ bool Options::validate(std::string* why) const {
   return msg.empty();
 }
 
-std::vector<Keypoint> keypoints_from_cv(const std::vector<cv::KeyPoint>& keypoints) {
+std::vector<Keypoint> keypoints_from_cv(const std::vector<cv::KeyPoint>& keypoints,
+                                        double octave_scale_factor) {
+  GEODRIFT_CHECK(
+      std::isfinite(octave_scale_factor) && octave_scale_factor >= 0,
+      "kvld::keypoints_from_cv: octave_scale_factor " << octave_scale_factor << " must be >= 0");
   std::vector<Keypoint> out;
   out.reserve(keypoints.size());
   for (const cv::KeyPoint& k : keypoints) {
     Keypoint q;
     q.x = k.pt.x;
     q.y = k.pt.y;
-    q.scale = k.size;
+    q.scale = octave_scale_factor > 0 ? std::pow(octave_scale_factor, k.octave) : k.size;
     q.angle = k.angle < 0 ? std::numeric_limits<double>::quiet_NaN() : k.angle * (kPi / 180.0);
     out.push_back(q);
   }

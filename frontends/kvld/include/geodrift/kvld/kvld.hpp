@@ -63,7 +63,9 @@ struct ScaleLevel {
 /// ⌊log₂(max(W, H)/r₀)⌋ + 1 with base radius r₀ = 5.
 ///
 /// Built once per image and reused for any number of pairs (it is immutable, so it may be
-/// shared between threads). Memory: about 2 · 4 · W · H · 2 bytes (levels shrink by 2 each).
+/// shared between threads). Memory: 3 floats per pixel per level, levels shrinking by 2 in
+/// area: about 24·W·H bytes (11 MB for 1241×376). Building it costs about one ORB
+/// detect+compute of the same image (BENCHMARKS.md, "kVLD").
 ///
 /// Intensities are used as given; the reference code and the `max_contrast` gate (300) assume
 /// a 0–255 scale, which is what an 8-bit image gives.
@@ -145,9 +147,14 @@ struct Keypoint {
   double angle = 0.0;
 };
 
-/// Converts OpenCV keypoints: pt → (x, y), size → scale, angle degrees → radians. An angle of
-/// −1 (OpenCV's "not computed") becomes NaN, which `filter` rejects when geometry is on.
-std::vector<Keypoint> keypoints_from_cv(const std::vector<cv::KeyPoint>& keypoints);
+/// Converts OpenCV keypoints: pt → (x, y), angle degrees → radians, and scale = size, or, with
+/// `octave_scale_factor` > 0, scale = octave_scale_factor^octave (ORB: 1.2^octave; only for
+/// detectors whose `octave` field is the plain pyramid level, not SIFT's packed one). An
+/// angle of −1 (OpenCV's "not computed") becomes NaN, which `filter` rejects when geometry
+/// is on.
+/// @throws InvalidArgument if octave_scale_factor is negative or non-finite.
+std::vector<Keypoint> keypoints_from_cv(const std::vector<cv::KeyPoint>& keypoints,
+                                        double octave_scale_factor = 0.0);
 
 /// A putative or kept match: index into the first and into the second keypoint list.
 struct Match {
