@@ -30,7 +30,7 @@ inline bool glyph_on(std::uint32_t code, int col, int row) {
 // ---- walls ---------------------------------------------------------------------------------
 
 Vec3f wall_texture(const FaceStyle& f, double u, double v, double fp) {
-  const float dirt = 0.88f + 0.24f * fbm(u, v, 3.0, fp, 3, f.seed + 7u);
+  const float dirt = 0.88f + 0.24f * fbm(u, v, 3.0, fp, 2, f.seed + 7u);
   switch (f.wall) {
     case 0: {  // brick
       const double bh = f.brick_h, bw = f.brick_w, mortar = 0.012;
@@ -52,8 +52,8 @@ Vec3f wall_texture(const FaceStyle& f, double u, double v, double fp) {
       return c * dirt;
     }
     case 1: {  // plaster with stains and streaks
-      const float stains = 0.82f + 0.36f * fbm(u, v, 1.6, fp, 4, f.seed + 3u);
-      const float streak = 0.93f + 0.14f * fbm(u * 4.0, v * 0.25, 1.0, fp * 4.0, 2, f.seed + 5u);
+      const float stains = 0.82f + 0.36f * fbm(u, v, 1.6, fp, 3, f.seed + 3u);
+      const float streak = 0.93f + 0.14f * fbm(u * 4.0, v * 0.25, 1.0, fp * 4.0, 1, f.seed + 5u);
       return f.wall_rgb * (stains * streak * dirt);
     }
     case 2: {  // stone blocks
@@ -218,8 +218,8 @@ Vec3f ground(const RoutePoint& rp, const Eigen::Vector3d& p, double fp, std::uin
   const double ad = std::abs(rp.d), s = rp.s;
   const float k_fine = detail_fade(0.08, fp);
   if (ad < 5.5) {
-    float a = 0.15f + 0.09f * (fbm(p.x(), p.y(), 2.0, fp, 4, seed + 101u) - 0.5f) * 2.0f;
-    a += k_fine * 0.05f * (hash2f(ifloor(p.x() * 25.0), ifloor(p.y() * 25.0), seed + 103u) - 0.5f);
+    float a = 0.15f + 0.09f * (fbm(p.x(), p.y(), 2.0, fp, 3, seed + 101u) - 0.5f) * 2.0f;
+    a += k_fine * 0.06f * (value_noise(p.x() * 18.0, p.y() * 18.0, seed + 103u) - 0.5f);
     // Repair patches (corner-rich rectangles).
     const int pi = ifloor(s / 7.0), pj = ifloor((rp.d + 20.0) / 2.5);
     const std::uint32_t ph = hash2i(pi, pj, seed + 107u);
@@ -233,8 +233,9 @@ Vec3f ground(const RoutePoint& rp, const Eigen::Vector3d& p, double fp, std::uin
     const std::uint32_t mh = hash2i(mi, 3, seed + 109u);
     if (hf(mh) < 0.5f) {
       const double ms = 23.0 * mi + 3.0 + 15.0 * hf(mh * 3u), md = (mh & 4u) ? 1.7 : -1.7;
-      const double r = std::hypot(s - ms, rp.d - md);
-      if (r < 0.36) {
+      const double r2 = (s - ms) * (s - ms) + (rp.d - md) * (rp.d - md);
+      if (r2 < 0.36 * 0.36) {
+        const double r = std::sqrt(r2);
         const bool groove = detail_fade(0.04, fp) > 0.5f && line_dist(s - ms, 0.09) < 0.015;
         return grey(r > 0.31 ? 0.08f : groove ? 0.12f : 0.22f);
       }

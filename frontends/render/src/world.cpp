@@ -104,9 +104,17 @@ RoutePoint World::Impl::nearest_route(double x, double y, double* dist) const {
 }
 
 double World::Impl::ground_z(double x, double y, RoutePoint* rp) const {
-  const RoutePoint r = nearest_route(x, y);
-  if (rp) *rp = r;
-  return r.camera_z - options.camera_height_m;
+  if (rp) *rp = nearest_route(x, y);
+  double fx = (x - gx0) / gcell, fy = (y - gy0) / gcell;
+  fx = std::clamp(fx, 0.0, static_cast<double>(gnx));
+  fy = std::clamp(fy, 0.0, static_cast<double>(gny));
+  const int ix = std::min(static_cast<int>(fx), gnx - 1),
+            iy = std::min(static_cast<int>(fy), gny - 1);
+  const double ax = fx - ix, ay = fy - iy;
+  const std::size_t stride = static_cast<std::size_t>(gnx) + 1;
+  const double* c = &ground_corner[static_cast<std::size_t>(iy) * stride + ix];
+  return (1 - ay) * ((1 - ax) * c[0] + ax * c[1]) +
+         ay * ((1 - ax) * c[stride] + ax * c[stride + 1]);
 }
 
 // ---- construction ------------------------------------------------------------------------------
@@ -249,7 +257,10 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
   auto centre_of = [&](int ix, int iy) {
     return Eigen::Vector2d(w.gx0 + (ix + 0.5) * w.gcell, w.gy0 + (iy + 0.5) * w.gcell);
   };
+  // Seeds: only the route inside the generated stretch, so that a later pass of the sequence
+  // near this place (another height, another street) does not cut into this world.
   for (std::size_t k = 0; k < w.pv.size(); ++k) {
+    if (w.ps[k] < w.s_lo - 1.0 || w.ps[k] > w.s_hi + 1.0) continue;
     const int ix = static_cast<int>(std::floor((w.pv[k].x() - w.gx0) / w.gcell));
     const int iy = static_cast<int>(std::floor((w.pv[k].y() - w.gy0) / w.gcell));
     if (ix < 0 || iy < 0 || ix >= w.gnx || iy >= w.gny) continue;
@@ -289,6 +300,15 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
   }
   for (std::int32_t& k : w.nearest)
     if (k < 0) k = 0;  // unreachable in practice (the grid contains vertices)
+  // Ground height at the cell corners: camera height of the nearest route point minus the
+  // camera's height above the ground.
+  w.ground_corner.resize(static_cast<std::size_t>(w.gnx + 1) * (w.gny + 1));
+  for (int iy = 0; iy <= w.gny; ++iy)
+    for (int ix = 0; ix <= w.gnx; ++ix)
+      w.ground_corner[static_cast<std::size_t>(iy) * (w.gnx + 1) + ix] =
+          w.nearest_route(w.gx0 + ix * w.gcell, w.gy0 + iy * w.gcell).camera_z - o.camera_height_m;
+  w.ground_min = *std::min_element(w.ground_corner.begin(), w.ground_corner.end());
+  w.ground_max = *std::max_element(w.ground_corner.begin(), w.ground_corner.end());
 
   // ---- objects ----
   const std::uint64_t seed = o.seed;
@@ -537,35 +557,45 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
   w.onx = static_cast<int>(std::ceil(w.gnx * w.gcell / w.ocell));
   w.ony = static_cast<int>(std::ceil(w.gny * w.gcell / w.ocell));
   const std::size_t ocells = static_cast<std::size_t>(w.onx) * w.ony;
-  std::vector<std::vector<std::uint32_t>> lists(ocells);
-  auto add_aabb = [&](double x0, double y0, double x1, double y1, std::uint32_t item) {
-    const int ix0 = std::max(0, static_cast<int>(std::floor((x0 - w.gx0) / w.ocell)));
-    const int iy0 = std::max(0, static_cast<int>(std::floor((y0 - w.gy0) / w.ocell)));
-    const int ix1 = std::min(w.onx - 1, static_cast<int>(std::floor((x1 - w.gx0) / w.ocell)));
-    const int iy1 = std::min(w.ony - 1, static_cast<int>(std::floor((y1 - w.gy0) / w.ocell)));
-    for (int iy = iy0; iy <= iy1; ++iy)
-      for (int ix = ix0; ix <= ix1; ++ix)
-        lists[static_cast<std::size_t>(iy) * w.onx + ix].push_back(item);
-  };
   w.max_top_z = -1e300;
-  for (std::size_t i = 0; i < w.boxes.size(); ++i) {
-    const Box& b = w.boxes[i];
-    const double ex = b.hx * std::abs(b.ca) + b.hy * std::abs(b.sa);
-    const double ey = b.hx * std::abs(b.sa) + b.hy * std::abs(b.ca);
-    add_aabb(b.cx - ex, b.cy - ey, b.cx + ex, b.cy + ey, static_cast<std::uint32_t>(i));
-    w.max_top_z = std::max(w.max_top_z, b.z1);
+  for (int variant = 0; variant < 2; ++variant) {
+    const std::uint8_t mask = variant == 0 ? detail::kMaskVideo : detail::kMaskStreetView;
+    std::vector<std::vector<std::uint32_t>> lists(ocells);
+    std::vector<float>& top = w.cell_top[variant];
+    top.assign(ocells, -1e30f);
+    auto add_aabb = [&](double x0, double y0, double x1, double y1, double z1, std::uint32_t item) {
+      const int ix0 = std::max(0, static_cast<int>(std::floor((x0 - w.gx0) / w.ocell)));
+      const int iy0 = std::max(0, static_cast<int>(std::floor((y0 - w.gy0) / w.ocell)));
+      const int ix1 = std::min(w.onx - 1, static_cast<int>(std::floor((x1 - w.gx0) / w.ocell)));
+      const int iy1 = std::min(w.ony - 1, static_cast<int>(std::floor((y1 - w.gy0) / w.ocell)));
+      for (int iy = iy0; iy <= iy1; ++iy)
+        for (int ix = ix0; ix <= ix1; ++ix) {
+          const std::size_t c = static_cast<std::size_t>(iy) * w.onx + ix;
+          lists[c].push_back(item);
+          top[c] = std::max(top[c], static_cast<float>(z1) + 0.01f);
+        }
+      w.max_top_z = std::max(w.max_top_z, z1);
+    };
+    for (std::size_t i = 0; i < w.boxes.size(); ++i) {
+      const Box& b = w.boxes[i];
+      if (!(b.mask & mask)) continue;
+      const double ex = b.hx * std::abs(b.ca) + b.hy * std::abs(b.sa);
+      const double ey = b.hx * std::abs(b.sa) + b.hy * std::abs(b.ca);
+      add_aabb(b.cx - ex, b.cy - ey, b.cx + ex, b.cy + ey, b.z1, static_cast<std::uint32_t>(i));
+    }
+    for (std::size_t i = 0; i < w.spheres.size(); ++i) {
+      const Sphere& s = w.spheres[i];
+      if (!(s.mask & mask)) continue;
+      add_aabb(s.cx - s.r, s.cy - s.r, s.cx + s.r, s.cy + s.r, s.cz + s.r,
+               static_cast<std::uint32_t>(i) | Impl::kSphereBit);
+    }
+    std::vector<std::uint32_t>& start = w.cell_start[variant];
+    start.assign(ocells + 1, 0);
+    for (std::size_t c = 0; c < ocells; ++c)
+      start[c + 1] = start[c] + static_cast<std::uint32_t>(lists[c].size());
+    w.items[variant].reserve(start.back());
+    for (const auto& l : lists) w.items[variant].insert(w.items[variant].end(), l.begin(), l.end());
   }
-  for (std::size_t i = 0; i < w.spheres.size(); ++i) {
-    const Sphere& s = w.spheres[i];
-    add_aabb(s.cx - s.r, s.cy - s.r, s.cx + s.r, s.cy + s.r,
-             static_cast<std::uint32_t>(i) | Impl::kSphereBit);
-    w.max_top_z = std::max(w.max_top_z, s.cz + s.r);
-  }
-  w.cell_start.assign(ocells + 1, 0);
-  for (std::size_t c = 0; c < ocells; ++c)
-    w.cell_start[c + 1] = w.cell_start[c] + static_cast<std::uint32_t>(lists[c].size());
-  w.items.reserve(w.cell_start.back());
-  for (const auto& l : lists) w.items.insert(w.items.end(), l.begin(), l.end());
   impl_ = std::move(impl);
 }
 
@@ -689,11 +719,68 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
   constexpr double kMaxT = 300.0;
   Hit hit;
   hit.t = kMaxT;
-  const std::uint8_t mask = ctx.street_view ? detail::kMaskStreetView : detail::kMaskVideo;
+  const int variant = ctx.street_view ? 1 : 0;
+  const std::vector<std::uint32_t>& cstart = cell_start[variant];
+  const std::vector<std::uint32_t>& citems = items[variant];
+  const std::vector<float>& ctop = cell_top[variant];
 
-  // Objects: 2D DDA over the object grid.
+  // Ground first (it bounds the object search): first crossing of the ray below the height
+  // field, found by stepping with the local plane estimate, then Illinois false position.
+  // The ray can meet the ground only below ground_max; it has crossed it by ground_min.
+  double tground = kMaxT;
+  if (d.z() > 0) tground = o.z() >= ground_max ? 0.0 : (ground_max - o.z()) / d.z();
+  if (d.z() < 0) tground = std::min(tground, (o.z() - ground_min) / -d.z() + 1e-3);
+  tground = std::min(tground, kMaxT);
+  if (tground > 0 && ctx.origin_above_ground > 0) {
+    auto f = [&](double t) {
+      return o.z() + t * d.z() - ground_z(o.x() + t * d.x(), o.y() + t * d.y());
+    };
+    double ta = 0, fa = ctx.origin_above_ground, tb = 0, fb = 0;
+    bool bracket = false;
+    double t = 0, ft = fa;
+    for (int it = 0; it < 32 && t < tground; ++it) {
+      double step = d.z() < -1e-3 ? ft / -d.z() : 4.0 + 0.5 * t;
+      step = std::max(step, 0.02 + 0.01 * t);
+      const double tn = std::min(t + step, tground);
+      const double fn = f(tn);
+      if (fn <= 0) {
+        ta = t;
+        fa = ft;
+        tb = tn;
+        fb = fn;
+        bracket = true;
+        break;
+      }
+      t = tn;
+      ft = fn;
+    }
+    if (bracket) {
+      int side = 0;
+      double tm = tb;
+      for (int it = 0; it < 16; ++it) {
+        tm = (ta * fb - tb * fa) / (fb - fa);
+        const double fm = f(tm);
+        if (std::abs(fm) < 1e-4 || tb - ta < 1e-4) break;
+        if (fm < 0) {
+          tb = tm;
+          fb = fm;
+          if (side == -1) fa *= 0.5;
+          side = -1;
+        } else {
+          ta = tm;
+          fa = fm;
+          if (side == 1) fb *= 0.5;
+          side = 1;
+        }
+      }
+      hit.t = tm;
+      hit.kind = SurfaceKind::kGround;
+    }
+  }
+
+  // Objects: 2D DDA over the object grid up to the ground hit.
   const double gx1 = gx0 + onx * ocell, gy1 = gy0 + ony * ocell;
-  double tin = 0, tout = kMaxT;
+  double tin = 0, tout = hit.t;
   auto clip = [&](double oo, double dd, double lo, double hi) {
     if (std::abs(dd) < 1e-12) return oo >= lo && oo <= hi;
     double ta = (lo - oo) / dd, tb = (hi - oo) / dd;
@@ -706,6 +793,7 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
   const bool objects_possible = !(d.z() >= 0 && o.z() >= max_top_z) &&
                                 clip(o.x(), d.x(), gx0, gx1) && clip(o.y(), d.y(), gy0, gy1) &&
                                 tin <= tout;
+  bool object_hit = false;
   if (objects_possible) {
     const double sx = o.x() + tin * d.x(), sy = o.y() + tin * d.y();
     int ix = std::clamp(static_cast<int>(std::floor((sx - gx0) / ocell)), 0, onx - 1);
@@ -719,35 +807,46 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
     double tmy =
         std::abs(d.y()) > 1e-12 ? (gy0 + (iy + (stepy > 0 ? 1 : 0)) * ocell - o.y()) / d.y() : inf;
     double tcur = tin;
+    std::uint32_t recent[8] = {~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u};
+    int rpos = 0;
     while (true) {
       const double texit = std::min({tmx, tmy, tout});
       const std::size_t c = static_cast<std::size_t>(iy) * onx + ix;
-      for (std::uint32_t k = cell_start[c]; k < cell_start[c + 1]; ++k) {
-        const std::uint32_t item = items[k];
-        if (item & kSphereBit) {
-          const detail::Sphere& s = spheres[item & ~kSphereBit];
-          if (!(s.mask & mask)) continue;
-          const double t = intersect_sphere(s, o, d, 1e-4);
-          if (t < hit.t) {
-            hit.t = t;
-            hit.kind = SurfaceKind::kCanopy;
-            hit.obj = static_cast<int>(item & ~kSphereBit);
-            hit.face = -1;
-          }
-        } else {
-          const detail::Box& b = boxes[item];
-          if (!(b.mask & mask)) continue;
-          int face = -1;
-          const double t = intersect_box(b, o, d, 1e-4, hit.t, &face);
-          if (t < hit.t) {
-            hit.t = t;
-            hit.kind = b.kind;
-            hit.obj = static_cast<int>(item);
-            hit.face = face;
+      // Skip cells whose objects are all below the ray over this cell.
+      const double zlow = o.z() + (d.z() >= 0 ? tcur : texit) * d.z();
+      if (zlow <= ctop[c]) {
+        for (std::uint32_t k = cstart[c]; k < cstart[c + 1]; ++k) {
+          const std::uint32_t item = citems[k];
+          bool seen = false;
+          for (std::uint32_t r : recent) seen = seen || r == item;
+          if (seen) continue;
+          recent[rpos] = item;
+          rpos = (rpos + 1) & 7;
+          if (item & kSphereBit) {
+            const detail::Sphere& s = spheres[item & ~kSphereBit];
+            const double t = intersect_sphere(s, o, d, 1e-4);
+            if (t < hit.t) {
+              hit.t = t;
+              hit.kind = SurfaceKind::kCanopy;
+              hit.obj = static_cast<int>(item & ~kSphereBit);
+              hit.face = -1;
+              object_hit = true;
+            }
+          } else {
+            const detail::Box& b = boxes[item];
+            int face = -1;
+            const double t = intersect_box(b, o, d, 1e-4, hit.t, &face);
+            if (t < hit.t) {
+              hit.t = t;
+              hit.kind = b.kind;
+              hit.obj = static_cast<int>(item);
+              hit.face = face;
+              object_hit = true;
+            }
           }
         }
       }
-      if (hit.t <= texit || texit >= tout) break;
+      if ((object_hit && hit.t <= texit) || texit >= tout) break;
       tcur = texit;
       if (tmx < tmy) {
         ix += stepx;
@@ -758,76 +857,17 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
         tmy += tdy;
         if (iy < 0 || iy >= ony) break;
       }
-      if (tcur > hit.t) break;
     }
   }
-
-  // Ground: first crossing of the ray below the height field, before the object hit.
-  const double tlimit = hit.t;
-  if (d.z() < 0.12) {
-    auto f = [&](double t, RoutePoint* rp) {
-      return o.z() + t * d.z() - ground_z(o.x() + t * d.x(), o.y() + t * d.y(), rp);
-    };
-    double ta = 0, fa = ctx.origin_above_ground;
-    RoutePoint rp;
-    bool bracket = false;
-    double tb = 0, fb = 0;
-    if (fa > 0) {
-      double t = 0, ft = fa;
-      for (int it = 0; it < 24 && t < tlimit; ++it) {
-        double step = d.z() < -1e-3 ? ft / -d.z() : 4.0 + 0.5 * t;
-        step = std::max(step, 0.05 + 0.02 * t);
-        double tn = std::min(t + step, tlimit);
-        const double fn = f(tn, &rp);
-        if (fn <= 0) {
-          ta = t;
-          fa = ft;
-          tb = tn;
-          fb = fn;
-          bracket = true;
-          break;
-        }
-        if (tn >= tlimit) break;
-        t = tn;
-        ft = fn;
-      }
-    }
-    if (bracket) {
-      // Illinois false position.
-      int side = 0;
-      double tm = tb;
-      for (int it = 0; it < 12; ++it) {
-        tm = (ta * fb - tb * fa) / (fb - fa);
-        const double fm = f(tm, &rp);
-        if (std::abs(fm) < 1e-5) break;
-        if (fm * fb > 0) {
-          tb = tm;
-          fb = fm;
-          if (side == -1) fa *= 0.5;
-          side = -1;
-        } else {
-          ta = tm;
-          fa = fm;
-          if (side == 1) fb *= 0.5;
-          side = 1;
-        }
-      }
-      if (tm < hit.t) {
-        hit.t = tm;
-        hit.kind = SurfaceKind::kGround;
-        hit.obj = -1;
-        hit.face = -1;
-        hit.route = rp;
-      }
-    }
-  }
-  if (hit.t >= kMaxT) {
+  if (hit.kind == SurfaceKind::kGround && !object_hit) {
+    const Eigen::Vector3d p = o + hit.t * d;
+    hit.route = nearest_route(p.x(), p.y());
+  } else if (!object_hit) {
     hit.kind = SurfaceKind::kSky;
     hit.t = std::numeric_limits<double>::infinity();
     hit.obj = -1;
   }
-  if (hit.kind != SurfaceKind::kSky && hit.kind != SurfaceKind::kGround &&
-      hit.kind != SurfaceKind::kCanopy) {
+  if (object_hit && hit.kind != SurfaceKind::kCanopy) {
     const detail::Box& b = boxes[hit.obj];
     const Eigen::Vector3d p = o + hit.t * d;
     const double px = p.x() - b.cx, py = p.y() - b.cy;

@@ -195,6 +195,9 @@ struct World::Impl {
   double gx0 = 0, gy0 = 0, gcell = 2.0;
   int gnx = 0, gny = 0;
   std::vector<std::int32_t> nearest;
+  // Ground height at the grid's cell corners ((gnx + 1) x (gny + 1)), bilinear in between.
+  std::vector<double> ground_corner;
+  double ground_min = 0, ground_max = 0;  // extremes of ground_corner
 
   // Objects and their grid (items: box index, or sphere index | kSphereBit).
   std::vector<detail::Box> boxes;
@@ -203,7 +206,9 @@ struct World::Impl {
   std::vector<detail::FaceStyle> styles;
   double ocell = 4.0;
   int onx = 0, ony = 0;
-  std::vector<std::uint32_t> cell_start, items;
+  // Per appearance (0 video, 1 street view): CSR lists of the objects of each object cell.
+  std::vector<std::uint32_t> cell_start[2], items[2];
+  std::vector<float> cell_top[2];  // highest object point per object cell
   double max_top_z = 0;
   int n_cars_video = 0, n_cars_sv = 0, n_trees = 0, n_poles = 0, n_signs = 0;
   static constexpr std::uint32_t kSphereBit = 0x80000000u;
