@@ -219,7 +219,7 @@ Vec3f ground(const RoutePoint& rp, const Eigen::Vector3d& p, double fp, std::uin
   const float k_fine = detail_fade(0.08, fp);
   if (ad < 5.5) {
     float a = 0.15f + 0.09f * (fbm(p.x(), p.y(), 2.0, fp, 3, seed + 101u) - 0.5f) * 2.0f;
-    a += k_fine * 0.06f * (value_noise(p.x() * 18.0, p.y() * 18.0, seed + 103u) - 0.5f);
+    a += k_fine * 0.1f * (value_noise(p.x() * 18.0, p.y() * 18.0, seed + 103u) - 0.5f);
     // Repair patches (corner-rich rectangles).
     const int pi = ifloor(s / 7.0), pj = ifloor((rp.d + 20.0) / 2.5);
     const std::uint32_t ph = hash2i(pi, pj, seed + 107u);
@@ -275,7 +275,9 @@ Vec3f ground(const RoutePoint& rp, const Eigen::Vector3d& p, double fp, std::uin
   const float m = fbm(p.x(), p.y(), 5.0, fp, 3, seed + 127u);
   const Vec3f grass(0.16f, 0.26f, 0.09f), earth(0.34f, 0.29f, 0.21f);
   const Vec3f base = mixv(grass, earth, std::clamp((m - 0.4f) * 3.0f, 0.0f, 1.0f));
-  return base * (0.8f + 0.4f * fbm(p.x(), p.y(), 0.5, fp, 3, seed + 131u));
+  const float stones = fbm(p.x(), p.y(), 0.25, fp, 2, seed + 137u);
+  return base * (0.6f + 0.8f * fbm(p.x(), p.y(), 0.8, fp, 2, seed + 131u)) *
+         (stones > 0.62f ? 1.5f : 1.0f);
 }
 
 // ---- small objects -----------------------------------------------------------------------------
@@ -360,10 +362,11 @@ Vec3f shade(const World::Impl& w, const Eigen::Vector3d& dir, const Hit& hit, co
       const Sphere& s = w.spheres[hit.obj];
       n = (p - Eigen::Vector3d(s.cx, s.cy, s.cz)) / s.r;
       const double a = std::atan2(n.y(), n.x()) * s.r, e = p.z();
-      const float clump = fbm(a, e, 0.7, fp, 3, s.seed);
-      const float leaf = 0.85f + 0.3f * detail_fade(0.05, fp) *
-                                     (hash2f(ifloor(a * 14), ifloor(e * 14), s.seed + 1u) - 0.5f);
-      albedo = Vec3f(0.12f, 0.22f, 0.07f) * ((0.55f + 0.9f * clump) * leaf);
+      const float clump = fbm(a, e, 0.8, fp, 2, s.seed);
+      const float leaves = fbm(a, e, 0.18, fp, 2, s.seed + 1u);
+      const float c =
+          std::clamp(0.25f + 1.6f * (clump - 0.5f) + 1.4f * (leaves - 0.5f) + 0.5f, 0.15f, 1.6f);
+      albedo = Vec3f(0.13f, 0.23f, 0.07f) * c;
       ao = 0.6f + 0.4f * static_cast<float>(0.5 + 0.5 * n.z());
       break;
     }

@@ -373,185 +373,216 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
     return m;
   };
 
+  auto add_building = [&](Box b, int storeys, float storey_h, std::uint64_t style_key) {
+    b.z0 = min_ground(b) - 0.3;
+    b.z1 = b.z0 + 0.3 + storeys * storey_h + 0.7;
+    b.kind = SurfaceKind::kBuilding;
+    b.index = static_cast<int>(w.buildings.size());
+    b.seed = static_cast<std::uint32_t>(style_key);
+    detail::Building bd;
+    bd.box = static_cast<int>(w.boxes.size());
+    bd.style_base = static_cast<int>(w.styles.size());
+    bd.storeys = storeys;
+    for (int face = 0; face < 4; ++face) {
+      const float width = static_cast<float>(face < 2 ? 2 * b.hy : 2 * b.hx);
+      for (int variant = 0; variant < 2; ++variant) {
+        // variant 1 (street view) = variant 0 except for 20 % of the faces.
+        const bool replaced = detail::u01(detail::hash64(seed, 23, style_key, face)) < 0.2;
+        Rng srng(detail::hash64(seed, 29, style_key, face + (variant && replaced ? 8 : 0)));
+        w.styles.push_back(make_style(srng, width, storeys, storey_h, true));
+      }
+    }
+    w.buildings.push_back(bd);
+    w.boxes.push_back(b);
+    footprint_hash[fp_key(static_cast<int>(std::floor(b.cx / 20.0)),
+                          static_cast<int>(std::floor(b.cy / 20.0)))]
+        .push_back(b.index);
+  };
+
   const double kSlot = 40.0;
   const int slot0 = static_cast<int>(std::floor(w.s_lo / kSlot)),
             slot1 = static_cast<int>(std::floor(w.s_hi / kSlot));
-  for (int side = -1; side <= 1; side += 2) {
-    const std::uint64_t side_key = side > 0 ? 1 : 2;
-    for (int slot = slot0; slot <= slot1; ++slot) {
-      const double a0 = slot * kSlot, a1 = a0 + kSlot;
-      // Buildings.
-      {
-        Rng rng(detail::hash64(seed, 11, side_key, static_cast<std::uint64_t>(slot + 1000000)));
-        double u = a0 + rng.uniform(0.0, 3.0);
-        while (u < a1) {
-          if (rng.chance(0.22)) {
-            u += rng.uniform(3.0, 14.0);
-            continue;
+  // Pass 0: the street's first row of buildings; pass 1: everything else (it must not take
+  // the first row's place).
+  for (int pass = 0; pass < 2; ++pass)
+    for (int side = -1; side <= 1; side += 2) {
+      const std::uint64_t side_key = side > 0 ? 1 : 2;
+      for (int slot = slot0; slot <= slot1; ++slot) {
+        const double a0 = slot * kSlot, a1 = a0 + kSlot;
+        // Buildings.
+        if (pass == 0) {
+          Rng rng(detail::hash64(seed, 11, side_key, static_cast<std::uint64_t>(slot + 1000000)));
+          double u = a0 + rng.uniform(0.0, 3.0);
+          while (u < a1) {
+            if (rng.chance(0.22)) {
+              u += rng.uniform(3.0, 14.0);
+              continue;
+            }
+            const double len = rng.uniform(7.0, 22.0), depth = rng.uniform(8.0, 16.0);
+            const double setback = rng.chance(0.35) ? 0.0 : rng.uniform(0.0, 5.0);
+            const int storeys = rng.integer(2, 6);
+            const float storey_h = static_cast<float>(rng.uniform(2.9, 3.6));
+            const std::uint64_t style_key = rng.next();
+            Box b;
+            const bool ok = street_box(u, u + len, side, 9.5 + setback, depth, &b);
+            u += len + (rng.chance(0.5) ? 0.0 : rng.uniform(0.3, 2.0));
+            if (!ok || u - len < w.s_lo || u - len > w.s_hi) continue;
+            if (box_clearance(b) < 9.3 || overlaps_building(b)) continue;
+            add_building(b, storeys, storey_h, style_key);
           }
-          const double len = rng.uniform(7.0, 22.0), depth = rng.uniform(8.0, 16.0);
-          const double setback = rng.chance(0.35) ? 0.0 : rng.uniform(0.0, 5.0);
-          const int storeys = rng.integer(2, 6);
-          const float storey_h = static_cast<float>(rng.uniform(2.9, 3.6));
-          const std::uint64_t style_key = rng.next();
-          Box b;
-          const bool ok = street_box(u, u + len, side, 9.5 + setback, depth, &b);
-          u += len + (rng.chance(0.5) ? 0.0 : rng.uniform(0.3, 2.0));
-          if (!ok || u - len < w.s_lo || u - len > w.s_hi) continue;
-          if (box_clearance(b) < 9.3 || overlaps_building(b)) continue;
-          b.z0 = min_ground(b) - 0.3;
-          b.z1 = b.z0 + 0.3 + storeys * storey_h + 0.7;
-          b.kind = SurfaceKind::kBuilding;
-          b.index = static_cast<int>(w.buildings.size());
-          b.seed = static_cast<std::uint32_t>(style_key);
-          detail::Building bd;
-          bd.box = static_cast<int>(w.boxes.size());
-          bd.style_base = static_cast<int>(w.styles.size());
-          bd.storeys = storeys;
-          for (int face = 0; face < 4; ++face) {
-            const float width = static_cast<float>(face < 2 ? 2 * b.hy : 2 * b.hx);
-            for (int variant = 0; variant < 2; ++variant) {
-              // variant 1 (street view) = variant 0 except for 20 % of the faces.
-              const bool replaced = detail::u01(detail::hash64(seed, 23, style_key, face)) < 0.2;
-              Rng srng(detail::hash64(seed, 29, style_key, face + (variant && replaced ? 8 : 0)));
-              w.styles.push_back(make_style(srng, width, storeys, storey_h, true));
+        }
+        if (pass == 0) continue;
+        // A second row of taller buildings behind the first (fills gaps and the skyline).
+        {
+          Rng rng(detail::hash64(seed, 13, side_key, static_cast<std::uint64_t>(slot + 1000000)));
+          double u = a0 + rng.uniform(0.0, 6.0);
+          while (u < a1) {
+            if (rng.chance(0.15)) {
+              u += rng.uniform(4.0, 12.0);
+              continue;
+            }
+            const double len = rng.uniform(12.0, 30.0), depth = rng.uniform(10.0, 18.0);
+            const double front = 32.0 + rng.uniform(0.0, 10.0);
+            const int storeys = rng.integer(3, 9);
+            const float storey_h = static_cast<float>(rng.uniform(2.9, 3.5));
+            const std::uint64_t style_key = rng.next();
+            Box b;
+            const bool ok = street_box(u, u + len, side, front, depth, &b);
+            u += len + rng.uniform(0.0, 3.0);
+            if (!ok || u - len < w.s_lo || u - len > w.s_hi) continue;
+            if (box_clearance(b) < 28.0 || overlaps_building(b)) continue;
+            add_building(b, storeys, storey_h, style_key);
+          }
+        }
+        // Trees and poles (with signs) on the sidewalk.
+        {
+          Rng rng(detail::hash64(seed, 31, side_key, static_cast<std::uint64_t>(slot + 1000000)));
+          double u = a0 + rng.uniform(0.0, 8.0);
+          while (u < a1) {
+            const double s = u;
+            u += rng.uniform(9.0, 17.0);
+            if (!rng.chance(0.65) || s < w.s_lo || s > w.s_hi) continue;
+            const double r = rng.uniform(1.4, 2.4), trunk_h = rng.uniform(2.6, 3.4);
+            const std::uint32_t tseed = static_cast<std::uint32_t>(rng.next());
+            Box b;
+            if (!street_box(s - 0.15, s + 0.15, side, 8.3 + rng.uniform(-0.3, 0.3) - 0.15, 0.3, &b))
+              continue;
+            if (box_clearance(b) < 7.5) continue;
+            b.z0 = w.ground_z(b.cx, b.cy) - 0.1;
+            b.z1 = b.z0 + 0.1 + trunk_h + 0.5 * r;
+            b.kind = SurfaceKind::kTrunk;
+            b.index = w.n_trees;
+            b.seed = tseed;
+            w.boxes.push_back(b);
+            Sphere sp;
+            sp.cx = b.cx;
+            sp.cy = b.cy;
+            sp.cz = b.z0 + 0.1 + trunk_h + 0.75 * r;
+            sp.r = r;
+            sp.index = w.n_trees++;
+            sp.seed = tseed * 7u + 1u;
+            w.spheres.push_back(sp);
+          }
+          u = a0 + rng.uniform(0.0, 20.0);
+          while (u < a1) {
+            const double s = u;
+            u += rng.uniform(18.0, 34.0);
+            if (s < w.s_lo || s > w.s_hi) continue;
+            Box b;
+            if (!street_box(s - 0.08, s + 0.08, side, 6.2 - 0.08, 0.16, &b)) continue;
+            if (box_clearance(b) < 5.9) continue;
+            b.z0 = w.ground_z(b.cx, b.cy) - 0.1;
+            b.z1 = b.z0 + rng.uniform(5.5, 7.5);
+            b.kind = SurfaceKind::kPole;
+            b.index = w.n_poles++;
+            b.seed = static_cast<std::uint32_t>(rng.next());
+            b.colour = rng.chance(0.5) ? rgb(0.35, 0.36, 0.37) : rgb(0.18, 0.25, 0.2);
+            const bool sign = rng.chance(0.55);
+            const double sign_z = rng.uniform(2.2, 2.9), sign_w = rng.uniform(0.5, 0.8);
+            const std::uint32_t sseed = static_cast<std::uint32_t>(rng.next());
+            w.boxes.push_back(b);
+            if (sign) {
+              Box g = b;  // panel across the pole, facing along the road
+              g.hx = 0.025;
+              g.hy = 0.5 * sign_w;
+              g.z0 = b.z0 + 0.1 + sign_z;
+              g.z1 = g.z0 + sign_w;
+              g.kind = SurfaceKind::kSign;
+              g.index = w.n_signs++;
+              g.seed = sseed;
+              const double hue = detail::u01(sseed);
+              g.colour = hue < 0.4   ? rgb(0.1, 0.2, 0.6)
+                         : hue < 0.8 ? rgb(0.7, 0.08, 0.05)
+                                     : rgb(0.85, 0.7, 0.05);
+              w.boxes.push_back(g);
             }
           }
-          w.buildings.push_back(bd);
-          w.boxes.push_back(b);
-          footprint_hash[fp_key(static_cast<int>(std::floor(b.cx / 20.0)),
-                                static_cast<int>(std::floor(b.cy / 20.0)))]
-              .push_back(b.index);
         }
       }
-      // Trees and poles (with signs) on the sidewalk.
-      {
-        Rng rng(detail::hash64(seed, 31, side_key, static_cast<std::uint64_t>(slot + 1000000)));
-        double u = a0 + rng.uniform(0.0, 8.0);
-        while (u < a1) {
-          const double s = u;
-          u += rng.uniform(9.0, 17.0);
-          if (!rng.chance(0.65) || s < w.s_lo || s > w.s_hi) continue;
-          const double r = rng.uniform(1.4, 2.4), trunk_h = rng.uniform(2.6, 3.4);
-          const std::uint32_t tseed = static_cast<std::uint32_t>(rng.next());
-          Box b;
-          if (!street_box(s - 0.15, s + 0.15, side, 8.3 + rng.uniform(-0.3, 0.3) - 0.15, 0.3, &b))
-            continue;
-          if (box_clearance(b) < 7.5) continue;
-          b.z0 = w.ground_z(b.cx, b.cy) - 0.1;
-          b.z1 = b.z0 + 0.1 + trunk_h + 0.5 * r;
-          b.kind = SurfaceKind::kTrunk;
-          b.index = w.n_trees;
-          b.seed = tseed;
-          w.boxes.push_back(b);
-          Sphere sp;
-          sp.cx = b.cx;
-          sp.cy = b.cy;
-          sp.cz = b.z0 + 0.1 + trunk_h + 0.75 * r;
-          sp.r = r;
-          sp.index = w.n_trees++;
-          sp.seed = tseed * 7u + 1u;
-          w.spheres.push_back(sp);
-        }
-        u = a0 + rng.uniform(0.0, 20.0);
-        while (u < a1) {
-          const double s = u;
-          u += rng.uniform(18.0, 34.0);
-          if (s < w.s_lo || s > w.s_hi) continue;
-          Box b;
-          if (!street_box(s - 0.08, s + 0.08, side, 6.2 - 0.08, 0.16, &b)) continue;
-          if (box_clearance(b) < 5.9) continue;
-          b.z0 = w.ground_z(b.cx, b.cy) - 0.1;
-          b.z1 = b.z0 + rng.uniform(5.5, 7.5);
-          b.kind = SurfaceKind::kPole;
-          b.index = w.n_poles++;
-          b.seed = static_cast<std::uint32_t>(rng.next());
-          b.colour = rng.chance(0.5) ? rgb(0.35, 0.36, 0.37) : rgb(0.18, 0.25, 0.2);
-          const bool sign = rng.chance(0.55);
-          const double sign_z = rng.uniform(2.2, 2.9), sign_w = rng.uniform(0.5, 0.8);
-          const std::uint32_t sseed = static_cast<std::uint32_t>(rng.next());
-          w.boxes.push_back(b);
-          if (sign) {
-            Box g = b;  // panel across the pole, facing along the road
-            g.hx = 0.025;
-            g.hy = 0.5 * sign_w;
-            g.z0 = b.z0 + 0.1 + sign_z;
-            g.z1 = g.z0 + sign_w;
-            g.kind = SurfaceKind::kSign;
-            g.index = w.n_signs++;
-            g.seed = sseed;
-            const double hue = detail::u01(sseed);
-            g.colour = hue < 0.4   ? rgb(0.1, 0.2, 0.6)
-                       : hue < 0.8 ? rgb(0.7, 0.08, 0.05)
-                                   : rgb(0.85, 0.7, 0.05);
-            w.boxes.push_back(g);
+      if (pass == 0) continue;
+      // Parked cars, one bay every 6 m of arclength (bay index from s = 0).
+      const int bay0 = static_cast<int>(std::floor(w.s_lo / 6.0)),
+                bay1 = static_cast<int>(std::floor(w.s_hi / 6.0));
+      for (int bay = bay0; bay <= bay1; ++bay) {
+        Rng rng(detail::hash64(seed, 41, side_key, static_cast<std::uint64_t>(bay + 1000000)));
+        const bool video_car = rng.chance(0.45);
+        const double fate = rng.uniform();
+        const double shift = (rng.chance(0.5) ? -1 : 1) * rng.uniform(1.5, 5.0);
+        const bool new_sv_car = rng.chance(0.15);
+        const double len = rng.uniform(3.9, 4.7), wid = rng.uniform(1.72, 1.9);
+        const double jitter = rng.uniform(-0.6, 0.6);
+        const std::uint32_t cseed = static_cast<std::uint32_t>(rng.next());
+        const double hue = rng.uniform();
+        const detail::Vec3f colour = hue < 0.2    ? rgb(0.6, 0.6, 0.62)
+                                     : hue < 0.35 ? rgb(0.08, 0.08, 0.09)
+                                     : hue < 0.5  ? rgb(0.55, 0.06, 0.05)
+                                     : hue < 0.65 ? rgb(0.07, 0.15, 0.42)
+                                     : hue < 0.8  ? rgb(0.85, 0.85, 0.83)
+                                                  : rgb(0.2, 0.32, 0.22);
+        const double cabin_shift = rng.uniform(-0.3, 0.1), cabin_top = rng.uniform(1.38, 1.55);
+        auto add_car = [&](double s_mid, std::uint8_t mask) {
+          if (s_mid < w.s_lo || s_mid > w.s_hi) return;
+          Box body;
+          if (!street_box(s_mid - 0.5 * len, s_mid + 0.5 * len, side, 4.55 - 0.5 * wid, wid, &body))
+            return;
+          if (box_clearance(body) < 3.3) return;
+          const double g = w.ground_z(body.cx, body.cy);
+          body.z0 = g + 0.22;
+          body.z1 = g + 0.95;
+          body.kind = SurfaceKind::kCar;
+          body.mask = mask;
+          body.seed = cseed;
+          body.colour = colour;
+          body.index = (mask & detail::kMaskVideo) ? w.n_cars_video : w.n_cars_sv;
+          if (mask & detail::kMaskVideo) ++w.n_cars_video;
+          if (mask & detail::kMaskStreetView) ++w.n_cars_sv;
+          Box cabin = body;
+          cabin.hx = body.hx * 0.55;
+          cabin.hy = body.hy - 0.08;
+          cabin.cx += cabin_shift * body.ca;
+          cabin.cy += cabin_shift * body.sa;
+          cabin.z0 = body.z1;
+          cabin.z1 = g + cabin_top;
+          cabin.seed = cseed ^ 0x5555u;
+          cabin.part = 1;
+          w.boxes.push_back(body);
+          w.boxes.push_back(cabin);
+        };
+        const double s_mid = (bay + 0.5) * 6.0 + jitter;
+        if (video_car) {
+          if (fate < 0.40) {
+            add_car(s_mid, detail::kMaskBoth);
+          } else if (fate < 0.75) {
+            add_car(s_mid, detail::kMaskVideo);
+            add_car(s_mid + shift, detail::kMaskStreetView);
+          } else {
+            add_car(s_mid, detail::kMaskVideo);
           }
+        } else if (new_sv_car) {
+          add_car(s_mid, detail::kMaskStreetView);
         }
       }
     }
-    // Parked cars, one bay every 6 m of arclength (bay index from s = 0).
-    const int bay0 = static_cast<int>(std::floor(w.s_lo / 6.0)),
-              bay1 = static_cast<int>(std::floor(w.s_hi / 6.0));
-    for (int bay = bay0; bay <= bay1; ++bay) {
-      Rng rng(detail::hash64(seed, 41, side_key, static_cast<std::uint64_t>(bay + 1000000)));
-      const bool video_car = rng.chance(0.45);
-      const double fate = rng.uniform();
-      const double shift = (rng.chance(0.5) ? -1 : 1) * rng.uniform(1.5, 5.0);
-      const bool new_sv_car = rng.chance(0.15);
-      const double len = rng.uniform(3.9, 4.7), wid = rng.uniform(1.72, 1.9);
-      const double jitter = rng.uniform(-0.6, 0.6);
-      const std::uint32_t cseed = static_cast<std::uint32_t>(rng.next());
-      const double hue = rng.uniform();
-      const detail::Vec3f colour = hue < 0.2    ? rgb(0.6, 0.6, 0.62)
-                                   : hue < 0.35 ? rgb(0.08, 0.08, 0.09)
-                                   : hue < 0.5  ? rgb(0.55, 0.06, 0.05)
-                                   : hue < 0.65 ? rgb(0.07, 0.15, 0.42)
-                                   : hue < 0.8  ? rgb(0.85, 0.85, 0.83)
-                                                : rgb(0.2, 0.32, 0.22);
-      const double cabin_shift = rng.uniform(-0.3, 0.1), cabin_top = rng.uniform(1.38, 1.55);
-      auto add_car = [&](double s_mid, std::uint8_t mask) {
-        if (s_mid < w.s_lo || s_mid > w.s_hi) return;
-        Box body;
-        if (!street_box(s_mid - 0.5 * len, s_mid + 0.5 * len, side, 4.55 - 0.5 * wid, wid, &body))
-          return;
-        if (box_clearance(body) < 3.3) return;
-        const double g = w.ground_z(body.cx, body.cy);
-        body.z0 = g + 0.22;
-        body.z1 = g + 0.95;
-        body.kind = SurfaceKind::kCar;
-        body.mask = mask;
-        body.seed = cseed;
-        body.colour = colour;
-        body.index = (mask & detail::kMaskVideo) ? w.n_cars_video : w.n_cars_sv;
-        if (mask & detail::kMaskVideo) ++w.n_cars_video;
-        if (mask & detail::kMaskStreetView) ++w.n_cars_sv;
-        Box cabin = body;
-        cabin.hx = body.hx * 0.55;
-        cabin.hy = body.hy - 0.08;
-        cabin.cx += cabin_shift * body.ca;
-        cabin.cy += cabin_shift * body.sa;
-        cabin.z0 = body.z1;
-        cabin.z1 = g + cabin_top;
-        cabin.seed = cseed ^ 0x5555u;
-        cabin.part = 1;
-        w.boxes.push_back(body);
-        w.boxes.push_back(cabin);
-      };
-      const double s_mid = (bay + 0.5) * 6.0 + jitter;
-      if (video_car) {
-        if (fate < 0.40) {
-          add_car(s_mid, detail::kMaskBoth);
-        } else if (fate < 0.75) {
-          add_car(s_mid, detail::kMaskVideo);
-          add_car(s_mid + shift, detail::kMaskStreetView);
-        } else {
-          add_car(s_mid, detail::kMaskVideo);
-        }
-      } else if (new_sv_car) {
-        add_car(s_mid, detail::kMaskStreetView);
-      }
-    }
-  }
 
   // ---- object grid (4 m cells over the nearest-vertex grid's extent) ----
   w.onx = static_cast<int>(std::ceil(w.gnx * w.gcell / w.ocell));
