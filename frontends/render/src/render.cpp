@@ -71,6 +71,7 @@ cv::Mat render_image(const World::Impl& w, const detail::RayContext& ctx, const 
   };
   const int threads = thread_count(opt.threads);
   constexpr int kChunk = 8;
+  constexpr float kFlat = 3.0f / 255.0f;
   parallel_rows(height, threads, kChunk, [&](int r0, int r1) {
     if (opt.antialias == Antialias::kQuincunx) {
       // Corner rows r0 .. r1 (corner (i, j) at (i - 0.5, j - 0.5)), shared between pixels.
@@ -83,7 +84,16 @@ cv::Mat render_image(const World::Impl& w, const detail::RayContext& ctx, const 
           const std::size_t k0 = static_cast<std::size_t>(r - r0) * (width + 1) + c;
           const std::size_t k1 = k0 + (width + 1);
           const Vec3f sum = corners[k0] + corners[k0 + 1] + corners[k1] + corners[k1 + 1];
-          store(r, c, 0.5f * sample(c, r) + 0.125f * sum);
+          // Adaptive: where the four corners agree to within kFlat, the centre sample would
+          // change the pixel by at most ~kFlat/2, so their mean is used without tracing it.
+          const Vec3f lo =
+              corners[k0].cwiseMin(corners[k0 + 1]).cwiseMin(corners[k1].cwiseMin(corners[k1 + 1]));
+          const Vec3f hi =
+              corners[k0].cwiseMax(corners[k0 + 1]).cwiseMax(corners[k1].cwiseMax(corners[k1 + 1]));
+          if ((hi - lo).maxCoeff() <= kFlat)
+            store(r, c, 0.25f * sum);
+          else
+            store(r, c, 0.5f * sample(c, r) + 0.125f * sum);
         }
     } else {
       const int n = opt.antialias == Antialias::kGrid ? opt.grid_n : 1;
