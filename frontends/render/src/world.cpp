@@ -80,24 +80,33 @@ RoutePoint World::Impl::nearest_route(double x, double y, double* dist) const {
   const int k = nearest[static_cast<std::size_t>(iy) * gnx + ix];
   const int nseg = static_cast<int>(pv.size()) - 1;
   const int j0 = std::max(0, k - 3), j1 = std::min(nseg - 1, k + 2);
-  double best = std::numeric_limits<double>::infinity();
-  RoutePoint rp;
+  double best = std::numeric_limits<double>::infinity(), best_a = 0;
+  int best_j = j0;
   for (int j = j0; j <= j1; ++j) {
     const double ax = pv[j].x(), ay = pv[j].y();
     const double bx = pv[j + 1].x() - ax, by = pv[j + 1].y() - ay;
     const double l2 = bx * bx + by * by;
     double a = l2 > 0 ? ((x - ax) * bx + (y - ay) * by) / l2 : 0.0;
     a = std::clamp(a, 0.0, 1.0);
-    const double qx = ax + a * bx, qy = ay + a * by;
-    const double d2 = (x - qx) * (x - qx) + (y - qy) * (y - qy);
+    const double qx = ax + a * bx - x, qy = ay + a * by - y;
+    const double d2 = qx * qx + qy * qy;
     if (d2 < best) {
       best = d2;
-      const double l = std::sqrt(l2);
-      rp.s = ps[j] + a * (ps[j + 1] - ps[j]);
-      rp.camera_z = pv[j].z() + a * (pv[j + 1].z() - pv[j].z());
-      if (l > 0) rp.tangent = Eigen::Vector2d(bx / l, by / l);
-      rp.d = (x - qx) * rp.tangent.y() - (y - qy) * rp.tangent.x();
+      best_a = a;
+      best_j = j;
     }
+  }
+  RoutePoint rp;
+  {
+    const int j = best_j;
+    const double a = best_a;
+    const double bx = pv[j + 1].x() - pv[j].x(), by = pv[j + 1].y() - pv[j].y();
+    const double l = std::sqrt(bx * bx + by * by);
+    rp.s = ps[j] + a * (ps[j + 1] - ps[j]);
+    rp.camera_z = pv[j].z() + a * (pv[j + 1].z() - pv[j].z());
+    if (l > 0) rp.tangent = Eigen::Vector2d(bx / l, by / l);
+    const double qx = pv[j].x() + a * bx, qy = pv[j].y() + a * by;
+    rp.d = (x - qx) * rp.tangent.y() - (y - qy) * rp.tangent.x();
   }
   if (dist) *dist = std::sqrt(best);
   return rp;
@@ -105,16 +114,7 @@ RoutePoint World::Impl::nearest_route(double x, double y, double* dist) const {
 
 double World::Impl::ground_z(double x, double y, RoutePoint* rp) const {
   if (rp) *rp = nearest_route(x, y);
-  double fx = (x - gx0) / gcell, fy = (y - gy0) / gcell;
-  fx = std::clamp(fx, 0.0, static_cast<double>(gnx));
-  fy = std::clamp(fy, 0.0, static_cast<double>(gny));
-  const int ix = std::min(static_cast<int>(fx), gnx - 1),
-            iy = std::min(static_cast<int>(fy), gny - 1);
-  const double ax = fx - ix, ay = fy - iy;
-  const std::size_t stride = static_cast<std::size_t>(gnx) + 1;
-  const double* c = &ground_corner[static_cast<std::size_t>(iy) * stride + ix];
-  return (1 - ay) * ((1 - ax) * c[0] + ax * c[1]) +
-         ay * ((1 - ax) * c[stride] + ax * c[stride + 1]);
+  return ground_fast(x, y);
 }
 
 // ---- construction ------------------------------------------------------------------------------
@@ -309,6 +309,19 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
           w.nearest_route(w.gx0 + ix * w.gcell, w.gy0 + iy * w.gcell).camera_z - o.camera_height_m;
   w.ground_min = *std::min_element(w.ground_corner.begin(), w.ground_corner.end());
   w.ground_max = *std::max_element(w.ground_corner.begin(), w.ground_corner.end());
+  // Steepest ground slope between neighbouring grid corners (+ margin): tracing uses it to
+  // skip rays that climb faster than the ground can.
+  {
+    double g = 0.0;
+    const std::size_t stride = static_cast<std::size_t>(w.gnx) + 1;
+    for (int iy = 0; iy <= w.gny; ++iy)
+      for (int ix = 0; ix <= w.gnx; ++ix) {
+        const double z = w.ground_corner[iy * stride + ix];
+        if (ix < w.gnx) g = std::max(g, std::abs(w.ground_corner[iy * stride + ix + 1] - z));
+        if (iy < w.gny) g = std::max(g, std::abs(w.ground_corner[(iy + 1) * stride + ix] - z));
+      }
+    w.max_grade = g / w.gcell * 1.5 + 0.01;
+  }
 
   // ---- objects ----
   const std::uint64_t seed = o.seed;
@@ -762,19 +775,28 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
   if (d.z() > 0) tground = o.z() >= ground_max ? 0.0 : (ground_max - o.z()) / d.z();
   if (d.z() < 0) tground = std::min(tground, (o.z() - ground_min) / -d.z() + 1e-3);
   tground = std::min(tground, kMaxT);
-  if (tground > 0 && ctx.origin_above_ground > 0) {
+  // A ray climbing faster than the steepest ground never meets it.
+  const bool may_hit_ground = d.z() < max_grade * std::sqrt(d.x() * d.x() + d.y() * d.y());
+  if (may_hit_ground && tground > 0 && ctx.origin_above_ground > 0) {
     auto f = [&](double t) {
-      return o.z() + t * d.z() - ground_z(o.x() + t * d.x(), o.y() + t * d.y());
+      return o.z() + t * d.z() - ground_fast(o.x() + t * d.x(), o.y() + t * d.y());
     };
     double ta = 0, fa = ctx.origin_above_ground, tb = 0, fb = 0;
     bool bracket = false;
-    double t = 0, ft = fa;
+    double t = 0, ft = fa, slope = d.z();  // slope: df/dt estimate (plane under the origin)
+    bool done = false;
     for (int it = 0; it < 32 && t < tground; ++it) {
-      double step = d.z() < -1e-3 ? ft / -d.z() : 4.0 + 0.5 * t;
+      double step = slope < -1e-3 ? ft / -slope : 4.0 + 0.5 * t;
       step = std::max(step, 0.02 + 0.01 * t);
       const double tn = std::min(t + step, tground);
       const double fn = f(tn);
-      if (fn <= 0) {
+      if (std::abs(fn) < 1e-4) {
+        hit.t = tn;
+        hit.kind = SurfaceKind::kGround;
+        done = true;
+        break;
+      }
+      if (fn < 0) {
         ta = t;
         fa = ft;
         tb = tn;
@@ -782,10 +804,13 @@ Hit World::Impl::trace(const Eigen::Vector3d& d, const detail::RayContext& ctx) 
         bracket = true;
         break;
       }
+      // Secant slope for the next step, when it is a usable (descending) one.
+      const double sl = (fn - ft) / (tn - t);
+      slope = sl < -1e-3 ? sl : d.z();
       t = tn;
       ft = fn;
     }
-    if (bracket) {
+    if (bracket && !done) {
       int side = 0;
       double tm = tb;
       for (int it = 0; it < 16; ++it) {

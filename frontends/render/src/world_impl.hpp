@@ -198,6 +198,7 @@ struct World::Impl {
   // Ground height at the grid's cell corners ((gnx + 1) x (gny + 1)), bilinear in between.
   std::vector<double> ground_corner;
   double ground_min = 0, ground_max = 0;  // extremes of ground_corner
+  double max_grade = 0.2;                 // bound on |d ground / d horizontal distance| (tracing)
 
   // Objects and their grid (items: box index, or sphere index | kSphereBit).
   std::vector<detail::Box> boxes;
@@ -217,6 +218,19 @@ struct World::Impl {
 
   RoutePoint nearest_route(double x, double y, double* dist = nullptr) const;
   double ground_z(double x, double y, RoutePoint* rp = nullptr) const;
+  /// Bilinear ground height (the rendered ground), inlined for tracing.
+  double ground_fast(double x, double y) const {
+    double fx = (x - gx0) / gcell, fy = (y - gy0) / gcell;
+    fx = std::clamp(fx, 0.0, static_cast<double>(gnx));
+    fy = std::clamp(fy, 0.0, static_cast<double>(gny));
+    const int ix = std::min(static_cast<int>(fx), gnx - 1);
+    const int iy = std::min(static_cast<int>(fy), gny - 1);
+    const double ax = fx - ix, ay = fy - iy;
+    const std::size_t stride = static_cast<std::size_t>(gnx) + 1;
+    const double* c = &ground_corner[static_cast<std::size_t>(iy) * stride + ix];
+    return (1 - ay) * ((1 - ax) * c[0] + ax * c[1]) +
+           ay * ((1 - ax) * c[stride] + ax * c[stride + 1]);
+  }
   Eigen::Vector3d route_at(double s) const;
   detail::Hit trace(const Eigen::Vector3d& dir, const detail::RayContext& ctx) const;
 };
