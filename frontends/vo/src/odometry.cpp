@@ -74,6 +74,19 @@ struct FrameData {
           if (du * du + dv * dv <= r2) f(k);
         }
   }
+  template <class F>
+  void for_each_in_box(double u0, double v0, double u1, double v1, F f) const {
+    const int x0 = std::clamp(static_cast<int>(u0 / kGridCell), 0, gw - 1);
+    const int x1 = std::clamp(static_cast<int>(u1 / kGridCell), 0, gw - 1);
+    const int y0 = std::clamp(static_cast<int>(v0 / kGridCell), 0, gh - 1);
+    const int y1 = std::clamp(static_cast<int>(v1 / kGridCell), 0, gh - 1);
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x)
+        for (int k : grid[y * gw + x]) {
+          const cv::KeyPoint& kp = kps[k];
+          if (kp.pt.x >= u0 && kp.pt.x <= u1 && kp.pt.y >= v0 && kp.pt.y <= v1) f(k);
+        }
+  }
   const std::uint8_t* d(int k) const { return desc.ptr<std::uint8_t>(k); }
   Eigen::Vector2d uv(int k) const { return {kps[k].pt.x, kps[k].pt.y}; }
 };
@@ -763,26 +776,42 @@ struct Odometry::Impl {
       Eigen::Matrix3d tx;
       tx << 0, -t21.z(), t21.y(), t21.z(), 0, -t21.x(), -t21.y(), t21.x(), 0;
       const Eigen::Matrix3d F21 = Kinv.transpose() * tx * R21 * Kinv;
-      std::vector<int> free2;
-      for (std::size_t j = 0; j < k2.pt.size(); ++j)
-        if (k2.pt[j] < 0) free2.push_back(static_cast<int>(j));
+      // Depth range of k1's scene: a match must lie on the epipolar segment between the
+      // projections of the ray at the nearest depth and at infinity (a box query on the grid).
+      std::vector<double> z1;
+      for (int pid : k1.pt)
+        if (pid >= 0 && !pt(pid).bad) z1.push_back(k1.T_cw.act(pt(pid).X).z());
+      if (z1.empty()) continue;
+      const double zmin = 0.5 * *std::min_element(z1.begin(), z1.end());
       std::vector<int> owner(k2.kps.size(), -1), owner_d(k2.kps.size(), 256);
       std::vector<int> match(k1.kps.size(), -1);
       for (std::size_t i = 0; i < k1.kps.size(); ++i) {
         if (k1.pt[i] >= 0) continue;
+        const Eigen::Vector3d n1 = Kinv * Eigen::Vector3d(k1.kps[i].pt.x, k1.kps[i].pt.y, 1.0);
+        const Eigen::Vector3d a = R21 * n1 * zmin + t21, b = R21 * n1;
+        if (a.z() <= 0 || b.z() <= 0) continue;
+        const Eigen::Vector2d pa = cam.project(a), pb = cam.project(b);
+        const double margin = 6.0;
         const Eigen::Vector3d l = F21 * Eigen::Vector3d(k1.kps[i].pt.x, k1.kps[i].pt.y, 1.0);
         const double ln2 = l.head<2>().squaredNorm();
-        int best = kThLow + 1, bk = -1;
-        for (int j : free2) {
-          const double e = l.x() * k2.kps[j].pt.x + l.y() * k2.kps[j].pt.y + l.z();
-          if (e * e > 3.84 * ln2 * scale[octave(k2.kps[j])] * scale[octave(k2.kps[j])]) continue;
-          const int d = hamming(k1.d(static_cast<int>(i)), k2.d(j));
-          if (d < best) {
-            best = d;
-            bk = j;
-          }
-        }
-        if (bk < 0) continue;
+        int best = 256, second = 256, bk = -1;
+        k2.for_each_in_box(
+            std::min(pa.x(), pb.x()) - margin, std::min(pa.y(), pb.y()) - margin,
+            std::max(pa.x(), pb.x()) + margin, std::max(pa.y(), pb.y()) + margin, [&](int j) {
+              if (k2.pt[j] >= 0) return;
+              const double e = l.x() * k2.kps[j].pt.x + l.y() * k2.kps[j].pt.y + l.z();
+              const double s2 = scale[octave(k2.kps[j])];
+              if (e * e > 3.84 * ln2 * s2 * s2) return;
+              const int d = hamming(k1.d(static_cast<int>(i)), k2.d(j));
+              if (d < best) {
+                second = best;
+                best = d;
+                bk = j;
+              } else if (d < second) {
+                second = d;
+              }
+            });
+        if (bk < 0 || best > kThLow || best > 0.8 * second) continue;
         if (owner[bk] >= 0) {
           if (best >= owner_d[bk]) continue;
           match[owner[bk]] = -1;
@@ -886,8 +915,10 @@ struct Odometry::Impl {
     for (int round = 0; round < rounds; ++round) {
       solver::Problem problem;
       int used = 0;
+      std::vector<char> pose_used(kids.size(), 0);
       for (std::size_t j = 0; j < obs.size(); ++j) {
         if (outlier[j]) continue;
+        pose_used[static_cast<std::size_t>(obs[j].k)] = 1;
         const Ob& o = obs[j];
         solver::ReprojectionResidual r = base;
         const Kf& K = kf(kids[o.k]);
@@ -901,7 +932,7 @@ struct Odometry::Impl {
       for (std::size_t i = 0; i < kids.size(); ++i)
         if (!in_window.count(kids[i]) || kids[i] == 0 || kf(kids[i]).final) constant[i] = 1;
       for (std::size_t i = 0; i < kids.size(); ++i)
-        if (constant[i]) problem.set_constant(&poses[i]);
+        if (constant[i] && pose_used[i]) problem.set_constant(&poses[i]);
       solver::Options so;
       so.linear_solver = solver::LinearSolverType::kSchur;
       so.max_iterations = std::max(1, opt.ba_iterations / rounds);
