@@ -83,18 +83,76 @@ RunResult run_sequence(const map::Camera& cam, const std::vector<Eigen::Isometry
 
 }  // namespace
 
-TEST_CASE("VO tracks a rendered corridor drive with low drift", "[vo]") {
+TEST_CASE("VO tracks a synthetic corridor drive and streams every keyframe once, in order",
+          "[vo]") {
+  // A fast, texture-rich but unrealistic world (blocky noise; aliasing at distance): a check of
+  // the tracker's structure and of the keyframe stream; the accuracy target is checked on the
+  // rendered street world below.
   const map::Camera cam = test::corridor_camera();
   const test::Corridor world;
-  const int n = reduced() ? 120 : 200;
+  const int n = 120;
   std::vector<Eigen::Isometry3d> gt;
   for (int i = 0; i < n; ++i) gt.push_back(test::Corridor::pose(i));
   const RunResult r = run_sequence(
       cam, gt, [&](int i) { return world.render(cam, gt[static_cast<std::size_t>(i)]); }, {}, 50.0);
+  const double length = (gt.back().translation() - gt.front().translation()).norm();
+  INFO(r.messages << "tracked " << r.tracked << "/" << r.frames << ", keyframes " << r.keyframes
+                  << ", ATE " << r.ate_rmse_m << " m over " << length << " m, segment error "
+                  << r.segment_error_percent << " % over " << r.segments << " 50 m segments");
+  CHECK(r.tracked >= 0.95 * r.frames);
+  CHECK(r.keyframes >= 5);
+  CHECK(r.keyframes < r.frames / 2);
+  CHECK(r.ate_rmse_m < 0.015 * length);
+}
+
+#if __has_include(<geodrift/render/render.hpp>)
+#include "geodrift/io/trajectory.hpp"
+#include "geodrift/render/render.hpp"
+#include "geodrift/render/world.hpp"
+
+TEST_CASE("VO on rendered KITTI 02 frames: >= 95 % tracked, < 1 % drift over 100 m",
+          "[vo][slow][data]") {
+  const std::string poses = std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt/poses/02.txt";
+  if (!GEODRIFT_HAVE_DATA) {
+    WARN("no test data at " << poses);
+    return;
+  }
+  // 300 frames (about 290 m) in full runs; the CI form keeps 120 frames (> 100 m, so there are
+  // 100 m segments to score).
+  const int n = reduced() ? 120 : 300;
+  const io::Trajectory tr = io::read_trajectory(poses);
+  std::vector<Eigen::Isometry3d> T_K_c;
+  for (const auto& p : tr.poses) {
+    Eigen::Isometry3d T;
+    T.matrix() = p.T_cw.inverse().matrix();
+    T_K_c.push_back(T);
+  }
+  render::WorldOptions wo;
+  wo.first_frame = 0;
+  wo.last_frame = n - 1;
+  const render::World world = render::World::from_kitti(T_K_c, wo);
+  map::Camera cam;  // KITTI 00-02 cam0
+  cam.fx = cam.fy = 718.856;
+  cam.cx = 607.1928;
+  cam.cy = 185.2157;
+  cam.width = 1241;
+  cam.height = 376;
+  std::vector<Eigen::Isometry3d> gt;
+  for (int i = 0; i < n; ++i) {
+    Eigen::Isometry3d G;
+    G.matrix() = world.frame_T_cw(i).inverse().matrix();
+    gt.push_back(G);
+  }
+  render::RenderOptions ro;
+  ro.threads = 2;
+  const RunResult r = run_sequence(cam, gt, [&](int i) {
+    return render::render_pinhole(world, world.frame_T_cw(i), cam, render::Appearance::video(), ro);
+  });
   INFO(r.messages << "tracked " << r.tracked << "/" << r.frames << ", keyframes " << r.keyframes
                   << ", ATE " << r.ate_rmse_m << " m, segment error " << r.segment_error_percent
-                  << " % over " << r.segments << " 50 m segments");
+                  << " % over " << r.segments << " 100 m segments");
   CHECK(r.tracked >= 0.95 * r.frames);
   CHECK(r.segments > 0);
   CHECK(r.segment_error_percent < 1.0);
 }
+#endif

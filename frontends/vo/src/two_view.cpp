@@ -246,8 +246,35 @@ TwoViewResult initialize_two_view(const std::vector<Eigen::Vector2d>& x1,
   res.parallax_deg = c.parallax_rank_deg;
   res.median_parallax_deg = c.median_deg;
   res.num_good = c.good;
+  // Rotation-compensated flow: how far the inliers move beyond what the best pure rotation
+  // explains. Under pure rotation it is matching noise, whatever the noisy triangulation
+  // of a normalised near-zero translation claims about parallax.
+  {
+    const Eigen::Matrix3d Kmat =
+        (Eigen::Matrix3d() << cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1).finished();
+    // Best rotation-only fit b2 ~ R b1 of the inlier bearings (Kabsch).
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (int i = 0; i < n; ++i)
+      if (inl[i])
+        C += (Kinv * x2[i].homogeneous()).normalized() *
+             (Kinv * x1[i].homogeneous()).normalized().transpose();
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(C, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    const Eigen::Matrix3d Rrot = svd.matrixU() * D * svd.matrixV().transpose();
+    const Eigen::Matrix3d Hr = Kmat * Rrot * Kinv;
+    std::vector<double> flow;
+    for (int i = 0; i < n; ++i)
+      if (inl[i]) flow.push_back((apply_h(Hr, x1[i]) - x2[i]).norm());
+    std::nth_element(flow.begin(), flow.begin() + flow.size() / 2, flow.end());
+    res.derotated_flow_px = flow.empty() ? 0.0 : flow[flow.size() / 2];
+  }
   std::ostringstream why;
-  if (c.parallax_rank_deg < o.min_parallax_deg) {
+  if (res.derotated_flow_px < o.min_derotated_flow_px) {
+    why << "pure rotation: the rotation alone explains the matches (median rotation-compensated "
+           "flow "
+        << res.derotated_flow_px << " px < " << o.min_derotated_flow_px << " px), " << model.str();
+  } else if (c.parallax_rank_deg < o.min_parallax_deg) {
     why << "too little parallax (pure rotation or too short baseline): parallax "
         << c.parallax_rank_deg << " deg < " << o.min_parallax_deg << " deg, " << model.str();
   } else if (c.good < o.min_triangulated || c.good < o.min_good_ratio * res.num_inliers) {

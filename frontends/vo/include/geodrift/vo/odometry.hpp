@@ -69,7 +69,7 @@ struct OdometryOptions {
   double search_radius_px = 12.0;     ///< projection search radius at level 0 (x level scale)
   int keyframe_max_frames = 10;       ///< a keyframe at least this often (frames)
   int keyframe_min_frames = 1;        ///< and not more often than this
-  double keyframe_track_ratio = 0.9;  ///< keyframe when inliers < ratio x reference KF points
+  double keyframe_track_ratio = 0.6;  ///< keyframe when inliers < ratio x reference KF points
   int local_window = 8;               ///< keyframes optimised by local BA (newest + covisible)
   int triangulation_neighbors = 6;    ///< covisible keyframes used to triangulate new points
   int ba_iterations = 8;              ///< LM iterations per local BA (two rounds of half)

@@ -23,10 +23,11 @@ struct TwoViewOptions {
   double homography_ratio = 0.45;  ///< R_H above which the homography is used (ORB-SLAM 0.40-0.45)
   double min_parallax_deg = 1.0;   ///< the `parallax_rank`-th largest parallax must exceed it
   int parallax_rank = 50;          ///< ORB-SLAM uses the 50th
-  int min_matches = 100;           ///< fewer putative matches: fail without trying
-  int min_triangulated = 50;       ///< good points needed
-  double min_good_ratio = 0.5;     ///< good points / model inliers needed
-  bool refine = true;              ///< two-view BA (core solver) of the chosen solution
+  double min_derotated_flow_px = 3.0;  ///< median inlier motion beyond the rotation, pixels
+  int min_matches = 100;               ///< fewer putative matches: fail without trying
+  int min_triangulated = 50;           ///< good points needed
+  double min_good_ratio = 0.5;         ///< good points / model inliers needed
+  bool refine = true;                  ///< two-view BA (core solver) of the chosen solution
 };
 
 struct TwoViewResult {
@@ -41,6 +42,7 @@ struct TwoViewResult {
   double score_h = 0, score_e = 0;
   double parallax_deg = 0;  ///< the parallax_rank-th largest parallax of good points
   double median_parallax_deg = 0;
+  double derotated_flow_px = 0;  ///< median rotation-compensated inlier flow (pure-rotation test)
 };
 
 /// Initialises from matched undistorted pixels x1[i] <-> x2[i] of two views of `camera`.
