@@ -156,3 +156,32 @@ TEST_CASE("VO on rendered KITTI 02 frames: >= 95 % tracked, < 1 % drift over 100
   CHECK(r.segment_error_percent < 1.0);
 }
 #endif
+
+TEST_CASE("VO reports black frames mid-sequence as lost and relocalises after them", "[vo]") {
+  const map::Camera cam = test::corridor_camera();
+  const test::Corridor world;
+  vo::Odometry odo(cam);
+  int lost = 0, reloc = 0, tracked_after = 0;
+  std::string lost_msg;
+  for (int i = 0; i < 60; ++i) {
+    vo::Frame f;
+    f.index = i;
+    // Frames 30-32 black; the camera stands still meanwhile (a tunnel-like dropout), so the
+    // frames after it still see the map.
+    const int pose_index = i < 30 ? i : (i <= 32 ? 29 : i - 3);
+    f.gray = (i >= 30 && i <= 32) ? cv::Mat(cam.height, cam.width, CV_8UC1, cv::Scalar(0))
+                                  : world.render(cam, test::Corridor::pose(pose_index));
+    const vo::FrameResult r = odo.process(f);
+    if (r.state == vo::FrameResult::State::kLost) {
+      ++lost;
+      if (lost_msg.empty()) lost_msg = r.message;
+    }
+    if (r.state == vo::FrameResult::State::kRelocalized) ++reloc;
+    if (i > 33 && r.has_pose()) ++tracked_after;
+  }
+  INFO(lost_msg);
+  CHECK(lost == 3);
+  CHECK_THAT(lost_msg, Catch::Contains("black or textureless"));
+  CHECK(reloc == 1);
+  CHECK(tracked_after == 26);
+}

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -153,8 +154,16 @@ class VideoSource final : public FrameSource {
  public:
   explicit VideoSource(const std::string& path) : path_(path) {
     if (!fs::is_regular_file(path)) throw Error("video file '" + path + "' does not exist");
-    if (!cap_.open(path) || !cap_.isOpened())
-      throw Error("cannot open video '" + path + "' (not a video OpenCV can decode)");
+    // OpenCV logs every backend it tries on an undecodable file; the error below says it once.
+    const auto level = cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+    bool opened = false;
+    try {
+      opened = cap_.open(path) && cap_.isOpened();
+    } catch (const cv::Exception&) {
+      opened = false;
+    }
+    cv::utils::logging::setLogLevel(level);
+    if (!opened) throw Error("cannot open video '" + path + "' (not a video OpenCV can decode)");
     fps_ = cap_.get(cv::CAP_PROP_FPS);
     if (!(fps_ > 0 && fps_ < 1000)) fps_ = 30.0;
     if (!cap_.read(first_) || first_.empty())
