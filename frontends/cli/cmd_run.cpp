@@ -170,9 +170,10 @@ int run_run(int argc, char** argv) {
       const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       std::fprintf(stderr,
                    "\rgeodrift run: frame %d%s, %.1f frames/s, %d keyframes, %d map points, %d "
-                   "correspondences   ",
+                   "2D-3D matches, %d geo correspondences   ",
                    frames, source->size() > 0 ? ("/" + std::to_string(source->size())).c_str() : "",
-                   frames / std::max(s, 1e-9), odo.num_keyframes(), odo.num_points(), last_matches);
+                   frames / std::max(s, 1e-9), odo.num_keyframes(), odo.num_points(), last_matches,
+                   static_cast<int>(corrector.correspondences().size()));
     }
   } while (source->next(&frame));
   odo.finish();
