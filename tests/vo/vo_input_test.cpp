@@ -1,0 +1,215 @@
+// Inputs and clean failures: calibration files, image folders, unreadable video, black frames,
+// pure rotation (the VO never initialises and says why), and `geodrift run` on bad input.
+
+#include <sys/wait.h>
+
+#include <catch2/catch.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
+
+#include "corridor.hpp"
+#include "geodrift/error.hpp"
+#include "geodrift/vo/input.hpp"
+#include "geodrift/vo/odometry.hpp"
+#include "support/test_files.hpp"
+
+using namespace geodrift;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+const char* kKittiCalib =
+    "P0: 7.188560000000e+02 0.000000000000e+00 6.071928000000e+02 0.000000000000e+00 "
+    "0.000000000000e+00 7.188560000000e+02 1.852157000000e+02 0.000000000000e+00 "
+    "0.000000000000e+00 0.000000000000e+00 1.000000000000e+00 0.000000000000e+00\n"
+    "P1: 7.188560000000e+02 0.000000000000e+00 6.071928000000e+02 -3.861448000000e+02 "
+    "0.000000000000e+00 7.188560000000e+02 1.852157000000e+02 0.000000000000e+00 "
+    "0.000000000000e+00 0.000000000000e+00 1.000000000000e+00 0.000000000000e+00\n";
+
+}  // namespace
+
+TEST_CASE("Calibration files: KITTI P0, K/D text, OpenCV YAML, and clear errors", "[vo]") {
+  test::TempDir t;
+  test::write_text(t.file("calib.txt"), kKittiCalib);
+  const vo::Calibration k = vo::load_calibration(t.file("calib.txt"));
+  CHECK(k.camera.fx == Approx(718.856));
+  CHECK(k.camera.fy == Approx(718.856));
+  CHECK(k.camera.cx == Approx(607.1928));
+  CHECK(k.camera.cy == Approx(185.2157));
+  CHECK_FALSE(k.has_distortion());
+
+  test::write_text(t.file("kd.txt"),
+                   "K: 500 0 320 0 510 240 0 0 1\nD: -0.1 0.01 0 0\nsize: 640 480\n");
+  const vo::Calibration kd = vo::load_calibration(t.file("kd.txt"));
+  CHECK(kd.camera.fy == Approx(510));
+  CHECK(kd.camera.width == 640);
+  CHECK(kd.has_distortion());
+
+  {
+    cv::FileStorage fs(t.file("cam.yaml"), cv::FileStorage::WRITE);
+    fs << "camera_matrix" << cv::Mat(cv::Matx33d(400, 0, 300, 0, 400, 200, 0, 0, 1));
+    fs << "distortion_coefficients" << cv::Mat(cv::Matx<double, 1, 5>(0.05, 0, 0, 0, 0));
+    fs << "image_width" << 600 << "image_height" << 400;
+  }
+  const vo::Calibration y = vo::load_calibration(t.file("cam.yaml"));
+  CHECK(y.camera.fx == Approx(400));
+  CHECK(y.camera.height == 400);
+  CHECK(y.distortion.size() == 5);
+
+  CHECK_THAT(error_of([&] { vo::load_calibration(t.file("missing.txt")); }),
+             Catch::Contains("does not exist"));
+  test::write_text(t.file("bad.txt"), "nothing here\n");
+  CHECK_THAT(error_of([&] { vo::load_calibration(t.file("bad.txt")); }),
+             Catch::Contains("no 'P0:' line"));
+  test::write_text(t.file("short.txt"), "P0: 1 2 3\n");
+  CHECK_THAT(error_of([&] { vo::load_calibration(t.file("short.txt")); }),
+             Catch::Contains("expected 12"));
+}
+
+TEST_CASE("Frame sources: KITTI folder order and times, unreadable video", "[vo]") {
+  test::TempDir t;
+  fs::create_directories(t.path() / "image_0");
+  for (int i : {2, 0, 1}) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.png", i);
+    cv::imwrite((t.path() / "image_0" / name).string(), cv::Mat(10, 12, CV_8UC1, cv::Scalar(i)));
+  }
+  test::write_text(t.file("times.txt"), "0.0\n0.1\n0.2\n");
+  auto src = vo::open_image_folder(t.path().string());
+  CHECK(src->size() == 3);
+  vo::Frame f;
+  for (int i = 0; i < 3; ++i) {
+    REQUIRE(src->next(&f));
+    CHECK(f.gray.at<std::uint8_t>(0, 0) == i);
+    CHECK(f.timestamp == Approx(0.1 * i));
+  }
+  CHECK_FALSE(src->next(&f));
+  CHECK_THAT(error_of([&] { vo::open_image_folder(t.file("nope")); }),
+             Catch::Contains("does not exist"));
+  test::write_text(t.file("video.mp4"), "this is not a video");
+  CHECK_THAT(error_of([&] { vo::open_video(t.file("video.mp4")); }), Catch::Contains("video.mp4"));
+  CHECK_THAT(error_of([&] { vo::open_video(t.file("none.avi")); }),
+             Catch::Contains("does not exist"));
+}
+
+TEST_CASE("Black frames and pure rotation never initialise, with the reason", "[vo]") {
+  const map::Camera cam = test::corridor_camera();
+  {
+    vo::Odometry odo(cam);
+    for (int i = 0; i < 5; ++i) {
+      vo::Frame f;
+      f.index = i;
+      f.gray = cv::Mat(cam.height, cam.width, CV_8UC1, cv::Scalar(0));
+      const vo::FrameResult r = odo.process(f);
+      CHECK_FALSE(r.has_pose());
+      CHECK_THAT(r.message, Catch::Contains("black or textureless"));
+    }
+    CHECK_FALSE(odo.initialized());
+  }
+  {
+    // The camera turns in place (yaw up to 12 degrees, some pitch): every pair is a homography.
+    const test::Corridor world;
+    vo::Odometry odo(cam);
+    std::string last;
+    for (int i = 0; i < 25; ++i) {
+      Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+      T.linear() = (Eigen::AngleAxisd(0.5 * i * M_PI / 180, Eigen::Vector3d::UnitY()) *
+                    Eigen::AngleAxisd(0.1 * i * M_PI / 180, Eigen::Vector3d::UnitX()))
+                       .toRotationMatrix();
+      T.translation() = Eigen::Vector3d(0, 0, 3);
+      vo::Frame f;
+      f.index = i;
+      f.gray = world.render(cam, T);
+      const vo::FrameResult r = odo.process(f);
+      CHECK_FALSE(r.has_pose());
+    }
+    CHECK_FALSE(odo.initialized());
+    INFO(odo.last_init_failure());
+    CHECK(odo.init_attempts() > 5);
+    CHECK((odo.last_init_failure().find("parallax") != std::string::npos ||
+           odo.last_init_failure().find("pure rotation") != std::string::npos));
+  }
+}
+
+#ifdef GEODRIFT_CLI_EXE
+namespace {
+struct Run {
+  int code = -1;
+  std::string output;
+};
+Run run(const std::string& args) {
+  const std::string cmd = std::string("'") + GEODRIFT_CLI_EXE + "' " + args + " 2>&1";
+  Run r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  REQUIRE(p != nullptr);
+  char buf[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+bool no_outputs(const test::TempDir& t, const std::string& out) {
+  if (fs::exists(t.path() / out)) return false;
+  for (const auto& e : fs::directory_iterator(t.path()))
+    if (e.path().filename().string().find("geodrift-tmp") != std::string::npos) return false;
+  return true;
+}
+}  // namespace
+
+TEST_CASE("geodrift run fails cleanly on bad input and leaves no output", "[vo][cli]") {
+  test::TempDir t;
+  const map::Camera cam = test::corridor_camera();
+  // An image folder of black frames, one of a pure rotation, and one without calibration.
+  const test::Corridor world;
+  for (const char* d : {"black", "rotation", "nocalib"}) fs::create_directories(t.path() / d);
+  for (int i = 0; i < 12; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.png", i);
+    cv::imwrite((t.path() / "black" / name).string(),
+                cv::Mat(cam.height, cam.width, CV_8UC1, cv::Scalar(0)));
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() =
+        Eigen::AngleAxisd(0.8 * i * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    const cv::Mat img = world.render(cam, T);
+    cv::imwrite((t.path() / "rotation" / name).string(), img);
+    cv::imwrite((t.path() / "nocalib" / name).string(), img);
+  }
+  const std::string calib = "K: 360 0 320 0 360 120 0 0 1\n";
+  test::write_text((t.path() / "black" / "calib.txt").string(), calib);
+  test::write_text((t.path() / "rotation" / "calib.txt").string(), calib);
+  test::write_text(t.file("bad.mp4"), "not a video");
+  const std::string out = t.file("out");
+  struct Case {
+    std::string args, expect;
+  } cases[] = {
+      {"--images " + t.file("black") + " --out " + out, "black or textureless"},
+      {"--images " + t.file("rotation") + " --out " + out, "could not initialise"},
+      {"--images " + t.file("nocalib") + " --out " + out, "no calibration"},
+      {"--images " + t.file("rotation") + " --calib " + t.file("nope.txt") + " --out " + out,
+       "does not exist"},
+      {"--video " + t.file("bad.mp4") + " --calib " + t.file("rotation/calib.txt") + " --out " +
+           out,
+       "cannot open video"},
+      {"--images " + t.file("rotation") + " --geotags " + t.file("x") + " --out " + out,
+       "not available yet"},
+  };
+  for (const Case& c : cases) {
+    const Run r = run("run " + c.args);
+    INFO(c.args << "\n" << r.output);
+    CHECK(r.code != 0);
+    CHECK_THAT(r.output, Catch::Contains(c.expect));
+    CHECK(no_outputs(t, "out"));
+  }
+}
+#endif
