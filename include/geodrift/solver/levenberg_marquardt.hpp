@@ -29,12 +29,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "geodrift/solver/block_cholesky_solver.hpp"
 #include "geodrift/solver/block_sparse_matrix.hpp"
 #include "geodrift/solver/cholmod_solver.hpp"
 #include "geodrift/solver/dense_solver.hpp"
@@ -44,12 +46,24 @@
 
 namespace geodrift::solver {
 
+/// LinearSolverType::kAuto uses the block Cholesky when L has at most this many blocks per block
+/// column on average (the drift graph: ~7; sphere2500 / torus3D with real fill: far more).
+inline constexpr double kAutoMaxBlocksPerColumn = 16.0;
+
 /// Which linear solver LM uses for the damped normal equations.
 enum class LinearSolverType {
   kCholmod,     ///< CHOLMOD supernodal Cholesky on the full H (general)
   kSchur,       ///< eliminate R^3 point blocks, CHOLMOD on the reduced camera system (BA)
   kDense,       ///< dense LLᵀ of H (tests, tiny problems)
   kSchurDense,  ///< Schur elimination, dense LLᵀ of the reduced camera system (tiny BA)
+  /// Block sparse Cholesky with fixed-size 6×6 / 7×7 kernels (block_cholesky_solver.hpp);
+  /// needs every free block of size 6 or 7 (SE(3) / Sim(3) pose graphs), else the solve stops
+  /// with kInvalidProblem.
+  kBlockCholesky,
+  /// kBlockCholesky when every free block has size 6 or 7 and its factor is thin (chain-like
+  /// graphs: at most kAutoMaxBlocksPerColumn blocks per column of L on average), otherwise
+  /// kCholmod. Decided at each symbolic analysis.
+  kAuto,
 };
 
 /// LM options; every member has a default.
@@ -159,6 +173,16 @@ inline const char* to_string(Termination t) {
   return "?";
 }
 
+/// State after one LM iteration (Summary::trace).
+struct IterationRecord {
+  int iteration = 0;       ///< 0 = the start, then 1, 2, ... (linear solves)
+  double cost = 0.0;       ///< cost at the current (best accepted) point after the iteration
+  bool accepted = false;   ///< whether this iteration's step was accepted
+  double lambda = 0.0;     ///< damping used by this iteration's step
+  double time_wall = 0.0;  ///< seconds since solve() started (steady clock)
+  double time_cpu = 0.0;   ///< process CPU seconds since solve() started (std::clock)
+};
+
 /// What happened in one solve.
 struct Summary {
   Termination termination = Termination::kInvalidOptions;
@@ -179,6 +203,10 @@ struct Summary {
   double time_factorize = 0.0;  ///< numeric factorisation (incl. Schur elimination) [s]
   double time_solve = 0.0;      ///< triangular solves / back-substitution [s]
   double time_total = 0.0;      ///< whole solve() [s]
+  double time_total_cpu = 0.0;  ///< whole solve(), process CPU time (std::clock) [s]
+  /// One record for the start and one per iteration (first iteration reaching a given cost,
+  /// convergence profiles). Reserved before the loop for up to 1000 iterations.
+  std::vector<IterationRecord> trace;
 
   /// Converged by one of the tolerance criteria (or zero cost).
   bool converged() const {
@@ -219,12 +247,25 @@ class LevenbergMarquardt {
   Summary solve(Problem* problem) {
     using Clock = std::chrono::steady_clock;
     const auto t_start = Clock::now();
+    const std::clock_t c_start = std::clock();
     Summary sum;
+    sum.trace.reserve(static_cast<std::size_t>(std::min(options_.max_iterations, 1000) + 1));
     const auto finish = [&](Termination t, std::string msg) {
       sum.termination = t;
       sum.message = std::move(msg);
       sum.time_total = std::chrono::duration<double>(Clock::now() - t_start).count();
+      sum.time_total_cpu = static_cast<double>(std::clock() - c_start) / CLOCKS_PER_SEC;
       return sum;
+    };
+    const auto record = [&](double cost, bool accepted, double lambda) {
+      IterationRecord r;
+      r.iteration = sum.iterations;
+      r.cost = cost;
+      r.accepted = accepted;
+      r.lambda = lambda;
+      r.time_wall = std::chrono::duration<double>(Clock::now() - t_start).count();
+      r.time_cpu = static_cast<double>(std::clock() - c_start) / CLOCKS_PER_SEC;
+      sum.trace.push_back(r);
     };
     std::string why;
     if (!options_.validate(&why)) return finish(Termination::kInvalidOptions, why);
@@ -240,8 +281,10 @@ class LevenbergMarquardt {
     sum.num_residuals = problem->num_residuals();
 
     // Linear solver + symbolic analysis (reused while the pattern is the same).
+    if (options_.linear_solver == LinearSolverType::kAuto && analyzed_ && !s.same_pattern(pattern_))
+      solver_.reset();  // kAuto decides again for a new pattern
     if (!solver_) {
-      solver_ = make_solver(options_.linear_solver);
+      solver_ = make_solver(resolve(options_.linear_solver, s));
       analyzed_ = false;
     }
     sum.linear_solver = solver_->name();
@@ -251,7 +294,12 @@ class LevenbergMarquardt {
       sum.time_analyze = std::chrono::duration<double>(Clock::now() - t0).count();
       if (st != LinearSolverStatus::kSuccess) {
         analyzed_ = false;
-        return finish(Termination::kLinearSolverFailure, solver_->message());
+        const std::string m = solver_->message();
+        const bool structural = options_.linear_solver == LinearSolverType::kBlockCholesky &&
+                                BlockCholeskySolver::supported_block_size(s) == 0;
+        solver_.reset();
+        return finish(structural ? Termination::kInvalidProblem : Termination::kLinearSolverFailure,
+                      m);
       }
       pattern_ = s.pattern();
       analyzed_ = true;
@@ -281,6 +329,7 @@ class LevenbergMarquardt {
       return finish(Termination::kNonFiniteResidual, "at the initial point: " + err.what);
     }
     sum.initial_cost = sum.final_cost = cost;
+    record(cost, true, 0.0);
     if (!g_.allFinite()) {
       problem->find_non_finite_jacobian(&err);
       return finish(Termination::kNonFiniteJacobian, "at the initial point: " + err.what);
@@ -360,6 +409,7 @@ class LevenbergMarquardt {
         std::printf("LM it %3d cost %.12g new %.12g rho %.3g lambda %.3g\n", sum.iterations, cost,
                     new_cost, rho, lambda);
       }
+      record(rho > 0.0 ? new_cost : cost, rho > 0.0, lambda);
       if (rho > 0.0) {
         ++sum.successful_steps;
         const double old_cost = cost;
@@ -424,8 +474,21 @@ class LevenbergMarquardt {
         return std::make_unique<DenseSolver>();
       case LinearSolverType::kSchurDense:
         return std::make_unique<SchurSolver>(std::make_unique<DenseSolver>());
+      case LinearSolverType::kBlockCholesky:
+        return std::make_unique<BlockCholeskySolver>();
+      case LinearSolverType::kAuto:
+        break;
     }
     return std::make_unique<CholmodSolver>();
+  }
+
+  /// kAuto's choice for structure s (see LinearSolverType::kAuto); other types unchanged.
+  static LinearSolverType resolve(LinearSolverType t, const BlockStructure& s) {
+    if (t != LinearSolverType::kAuto) return t;
+    if (BlockCholeskySolver::supported_block_size(s) == 0) return LinearSolverType::kCholmod;
+    return BlockCholeskySolver::thin_factor(s, kAutoMaxBlocksPerColumn)
+               ? LinearSolverType::kBlockCholesky
+               : LinearSolverType::kCholmod;
   }
 
   Options options_;
