@@ -421,7 +421,9 @@ TEMPLATE_TEST_CASE("Block Cholesky and kAuto reach the CHOLMOD and dense solutio
   for (std::size_t k = 1; k < graphs.size(); ++k) {
     INFO("solver " << sums[k].linear_solver);
     CHECK(sums[k].final_cost == Approx(sums[0].final_cost).epsilon(1e-10));
-    CHECK(max_pose_error(graphs[k].poses, graphs[0].poses) < 1e-8);
+    // 5e-8: the two reference solvers themselves (CHOLMOD, dense) stop 1.1e-8 apart on this
+    // Huber Sim3 graph (flat optimum, parameter-tolerance stop); a wrong factor is off by ≫ 1e-6.
+    CHECK(max_pose_error(graphs[k].poses, graphs[0].poses) < 5e-8);
   }
 }
 
@@ -481,4 +483,40 @@ TEST_CASE("kAuto picks the block Cholesky on a chain and CHOLMOD on mixed block 
   const solver::Summary sa = aut.solve(&pm);
   CHECK(sa.linear_solver == "cholmod");
   CHECK(sa.converged());
+}
+
+TEST_CASE("Speculative linearisation and the damping limit change the cost, not the optimum",
+          "[solver]") {
+  // Same problem, four settings: speculative on/off must take identical steps; Nielsen's 1/3
+  // and Marquardt's 1/10 limit reach the same optimum.
+  struct Run {
+    bool speculative;
+    double limit;
+  };
+  const Run runs[] = {{true, 0.1}, {false, 0.1}, {true, 1.0 / 3.0}, {false, 1.0 / 3.0}};
+  std::vector<PoseGraph<lie::Sim3d>> graphs;
+  std::vector<solver::Summary> sums;
+  for (const Run& r : runs) {
+    graphs.emplace_back(50, 0.01, 29);
+    Problem p;
+    graphs.back().build(&p, RobustLoss::cauchy(1.0));
+    Options o = tight(LinearSolverType::kAuto);
+    o.speculative_linearization = r.speculative;
+    o.lambda_decrease_limit = r.limit;
+    LevenbergMarquardt lm(o);
+    sums.push_back(lm.solve(&p));
+    INFO(sums.back().brief_report());
+    CHECK(sums.back().converged());
+  }
+  for (int k : {0, 2}) {
+    CHECK(sums[k].iterations == sums[k + 1].iterations);
+    CHECK(sums[k].successful_steps == sums[k + 1].successful_steps);
+    REQUIRE(sums[k].trace.size() == sums[k + 1].trace.size());
+    for (std::size_t t = 0; t < sums[k].trace.size(); ++t)
+      CHECK(sums[k].trace[t].cost == Approx(sums[k + 1].trace[t].cost).epsilon(1e-12));
+  }
+  for (std::size_t k = 1; k < sums.size(); ++k) {
+    CHECK(sums[k].final_cost == Approx(sums[0].final_cost).epsilon(1e-10));
+    CHECK(max_pose_error(graphs[k].poses, graphs[0].poses) < 1e-8);
+  }
 }

@@ -14,7 +14,8 @@
 ///
 /// λ update (gain ratio). ρ = (F(x) − F(x ⊞ δ)) / (L(0) − L(δ)) with the model decrease
 /// L(0) − L(δ) = ½·δᵀ(λ·D·δ − g). A step is accepted only if F decreases (ρ > 0); then
-/// λ ← λ·max(1/3, 1 − (2ρ − 1)³), ν ← 2; otherwise the states are restored and λ ← λ·ν,
+/// λ ← λ·max(f, 1 − (2ρ − 1)³), ν ← 2 (f = Options::lambda_decrease_limit: Nielsen's 1/3, or
+/// by default Marquardt's 1/10, see there); otherwise the states are restored and λ ← λ·ν,
 /// ν ← 2ν. Source: H.B. Nielsen, "Damping parameter in Marquardt's method", IMM-REP-1999-05,
 /// and K. Madsen, H.B. Nielsen, O. Tingleff, "Methods for non-linear least squares problems",
 /// 2nd ed., IMM DTU 2004, §3.2 (eq. 3.15 and Algorithm 3.16).
@@ -34,6 +35,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "geodrift/solver/block_cholesky_solver.hpp"
@@ -47,8 +49,11 @@
 namespace geodrift::solver {
 
 /// LinearSolverType::kAuto uses the block Cholesky when L has at most this many blocks per block
-/// column on average (the drift graph: ~7; sphere2500 / torus3D with real fill: far more).
-inline constexpr double kAutoMaxBlocksPerColumn = 16.0;
+/// column on average. Measured (BENCHMARKS.md): the block Cholesky is faster than CHOLMOD on the
+/// drift graph (7 blocks per column) and on all four g2o graphs (parking-garage 7, cubicle 15,
+/// torus3D 17, sphere2500 21); beyond that CHOLMOD's dense supernodes (BLAS-3) are expected to
+/// win, so larger fill goes to CHOLMOD.
+inline constexpr double kAutoMaxBlocksPerColumn = 24.0;
 
 /// Which linear solver LM uses for the damped normal equations.
 enum class LinearSolverType {
@@ -79,6 +84,14 @@ struct Options {
   double parameter_tolerance = 1e-8;
   /// Initial damping λ (relative to the scaled diagonal; 1e-4 = Ceres' initial radius 1e4).
   double initial_lambda = 1e-4;
+  /// Smallest factor an accepted step multiplies λ by: λ ← λ·max(lambda_decrease_limit,
+  /// 1 − (2ρ − 1)³). Nielsen's rule (and Ceres, g2o) uses 1/3; the default 1/10 is
+  /// Marquardt's original decrease factor (D. W. Marquardt, "An algorithm for least-squares
+  /// estimation of nonlinear parameters", SIAM J. Appl. Math. 11(2), 1963: λ/ν with ν = 10; also
+  /// GTSAM's lambdaFactor) as the limit for very good steps (ρ → 1), Nielsen's smooth rule
+  /// otherwise. Measured from the same starts (BENCHMARKS.md): Sim3 drift 10k 14 → 10
+  /// iterations, sphere2500 10 → 7, parking-garage 14 → 9, cubicle 47 → 46, torus3D 99 = 99.
+  double lambda_decrease_limit = 0.1;
   /// Stop (no step can decrease the cost) when λ exceeds this.
   double max_lambda = 1e32;
   /// λ never drops below this (as Ceres' max trust-region radius 1e16), so that a rejected
@@ -87,7 +100,14 @@ struct Options {
   /// Clamp of the Jacobi-scaled diagonal used for damping (as Ceres' min/max_lm_diagonal).
   double min_diagonal = 1e-6;
   double max_diagonal = 1e32;
-  LinearSolverType linear_solver = LinearSolverType::kCholmod;
+  /// kAuto: the block Cholesky for thin 6/7-block pose graphs, CHOLMOD otherwise; BA wants
+  /// kSchur (set it explicitly).
+  LinearSolverType linear_solver = LinearSolverType::kAuto;
+  /// After an accepted step, evaluate the next trial point with Jacobians into a second copy of
+  /// H and g (its cost decides the step as usual): when the step is accepted again, which is
+  /// the common case, the separate cost-only evaluation is saved. After a rejection trial points
+  /// are evaluated cost-only. Same steps either way; costs one more H in memory.
+  bool speculative_linearization = true;
   /// Threads for evaluation and assembly: 1 or 2 (2 splits the residual blocks whose H blocks
   /// fall in disjoint column halves; the rest run on one thread).
   int num_threads = 1;
@@ -116,6 +136,8 @@ struct Options {
       os << "max_lambda " << max_lambda << " < initial_lambda " << initial_lambda;
     else if (!(min_lambda >= 0.0) || !(min_lambda <= initial_lambda))
       os << "min_lambda " << min_lambda << " not in [0, initial_lambda " << initial_lambda << "]";
+    else if (!(lambda_decrease_limit > 0.0) || !(lambda_decrease_limit < 1.0))
+      os << "lambda_decrease_limit " << lambda_decrease_limit << " not in (0, 1)";
     else if (!(min_diagonal > 0.0) || !(max_diagonal >= min_diagonal))
       os << "diagonal clamp [" << min_diagonal << ", " << max_diagonal << "] is not 0 < min <= max";
     else if (num_threads != 1 && num_threads != 2)
@@ -308,6 +330,13 @@ class LevenbergMarquardt {
     // Buffers (sized once).
     H_.reset(&s);
     g_.resize(n);
+    if (options_.speculative_linearization) {
+      H2_.reset(&s);
+      g2_.resize(n);
+    } else {
+      H2_ = BlockSparseMatrix();
+      g2_.resize(0);
+    }
     diag_.resize(n);
     damp_.resize(n);
     rhs_.resize(n);
@@ -337,7 +366,7 @@ class LevenbergMarquardt {
     if (n == 0) return finish(Termination::kGradientTolerance, "no free parameters");
 
     double lambda = options_.initial_lambda, nu = 2.0;
-    bool relinearized = true;
+    bool relinearized = true, last_accepted = true, speculated = false;
     while (true) {
       if (cost == 0.0) return done(sum, cost, lambda, Termination::kZeroCost, "", finish);
       if (relinearized) {
@@ -395,9 +424,20 @@ class LevenbergMarquardt {
         model *= 0.5;
         problem->save_state();
         problem->plus(delta_.data());
-        const auto te = Clock::now();
-        const bool eval_ok = problem->evaluate_cost(&new_cost);
-        sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        bool eval_ok;
+        speculated = options_.speculative_linearization && last_accepted;
+        if (speculated) {
+          // Linearise the trial point into the spare buffers: its cost decides the step, and
+          // if it is accepted H, g are ready (the buffers are swapped, no second evaluation).
+          LinearizeTimes lt2;
+          eval_ok = problem->linearize(&H2_, g2_.data(), &new_cost, &lt2, &err);
+          sum.time_evaluate += lt2.evaluate;
+          sum.time_assemble += lt2.assemble;
+        } else {
+          const auto te = Clock::now();
+          eval_ok = problem->evaluate_cost(&new_cost);
+          sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        }
         if (eval_ok && std::isfinite(new_cost) && new_cost < cost && model > 0.0) {
           rho = (cost - new_cost) / model;
         } else {
@@ -410,24 +450,31 @@ class LevenbergMarquardt {
                     new_cost, rho, lambda);
       }
       record(rho > 0.0 ? new_cost : cost, rho > 0.0, lambda);
+      last_accepted = rho > 0.0;
       if (rho > 0.0) {
         ++sum.successful_steps;
         const double old_cost = cost;
         cost = new_cost;
         const double t = 2.0 * rho - 1.0;
-        lambda = std::max(options_.min_lambda, lambda * std::max(1.0 / 3.0, 1.0 - t * t * t));
+        lambda = std::max(options_.min_lambda,
+                          lambda * std::max(options_.lambda_decrease_limit, 1.0 - t * t * t));
         nu = 2.0;
         if (old_cost - new_cost <= options_.function_tolerance * old_cost) {
           return done(sum, cost, lambda, Termination::kFunctionTolerance,
                       "relative decrease " + num((old_cost - new_cost) / old_cost), finish);
         }
-        LinearizeTimes lt2;
-        double c2 = 0.0;
-        ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err);
-        sum.time_evaluate += lt2.evaluate;
-        sum.time_assemble += lt2.assemble;
-        if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
-          return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
+        if (speculated) {
+          std::swap(H_, H2_);
+          g_.swap(g2_);
+        } else {
+          LinearizeTimes lt2;
+          double c2 = 0.0;
+          ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err);
+          sum.time_evaluate += lt2.evaluate;
+          sum.time_assemble += lt2.assemble;
+          if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
+            return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
+        }
         if (!g_.allFinite()) {
           problem->find_non_finite_jacobian(&err);
           return done(sum, cost, lambda, Termination::kNonFiniteJacobian, err.what, finish);
@@ -495,8 +542,8 @@ class LevenbergMarquardt {
   std::unique_ptr<LinearSolver> solver_;
   bool analyzed_ = false;
   BlockStructure::Pattern pattern_;
-  BlockSparseMatrix H_;
-  Eigen::VectorXd g_, diag_, damp_, rhs_, delta_;
+  BlockSparseMatrix H_, H2_;
+  Eigen::VectorXd g_, g2_, diag_, damp_, rhs_, delta_;
 };
 
 }  // namespace geodrift::solver
