@@ -101,6 +101,7 @@ solver::Options our_options(solver::LinearSolverType type, int threads) {
   o.function_tolerance = kFunctionTolerance;
   o.gradient_tolerance = kGradientTolerance;
   o.parameter_tolerance = kParameterTolerance;
+  o.lambda_decrease_limit = 0.1;  // Marquardt's factor as the limit of Nielsen's rule (see Options)
   return o;
 }
 
