@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
-"""Turns bench_solver JSON output (one or more files) into the markdown table of BENCHMARKS.md.
+"""Turns bench_solver JSON output (one or more files) into the markdown tables of BENCHMARKS.md.
 
 usage: bench/support/benchmarks_table.py run1.json [run2.json ...]
-Uses the median aggregate when a case was repeated, the single run otherwise.
+Uses the median aggregate when a case was repeated, the single run otherwise. CPU columns are
+the process CPU time of the solve (std::clock, counter total_cpu_ms), wall columns the manual
+time. "reach" = the first iteration whose cost is <= 1.001 x Ceres' final cost of the same run.
 """
 import json
 import re
@@ -23,19 +25,20 @@ for path in sys.argv[1:]:
 GRAPHS = ["sphere2500", "parking-garage", "torus3D", "cubicle"]
 
 
+def which_of(kind, arg):
+    if kind == "Se3Graph":
+        return GRAPHS[arg]
+    if kind == "Ba":
+        return "synthetic 500x50k" if arg == 0 else "KITTI 00"
+    return f"{arg} kf"
+
+
 def case_of(name):
-    m = re.match(r"BM_(\w+?)_(Ours|Ceres)/(\w+):(\d+)/threads:(\d+)", name)
+    m = re.match(r"BM_(\w+?)_(OursCholmod|Ours|Ceres)/(\w+):(\d+)/threads:(\d+)", name)
     if not m:
         return None
-    kind, who, argname, arg, threads = m.groups()
-    arg = int(arg)
-    if kind == "Se3Graph":
-        which = GRAPHS[arg]
-    elif kind == "Ba":
-        which = "synthetic 500x50k" if arg == 0 else "KITTI 00"
-    else:
-        which = f"{arg} kf"
-    return kind, which, who, int(threads)
+    kind, who, _, arg, threads = m.groups()
+    return kind, which_of(kind, int(arg)), who, int(threads)
 
 
 def fmt_ms(v):
@@ -47,13 +50,7 @@ for name, b in rows.items():
     m = re.match(r"BM_Floor_(\w+)/(\w+):(\d+)", name)
     if m:
         kind, _, arg = m.groups()
-        arg = int(arg)
-        key = (
-            {"Se3Graph": "Se3Graph", "Sim3Drift": "Sim3Drift", "Ba": "Ba"}[kind],
-            GRAPHS[arg] if kind == "Se3Graph" else
-            ("synthetic 500x50k" if arg == 0 else "KITTI 00") if kind == "Ba" else f"{arg} kf",
-        )
-        floors[key] = b
+        floors[(kind, which_of(kind, int(arg)))] = b
 
 cases = {}
 for name, b in rows.items():
@@ -62,10 +59,6 @@ for name, b in rows.items():
         kind, which, who, threads = c
         cases.setdefault((kind, which, threads), {})[who] = b
 
-print("| problem | threads | ours: wall [ms] | CPU [ms] | iters | ms/iter | final cost "
-      "| Ceres: wall [ms] | CPU [ms] | iters | ms/iter | final cost "
-      "| speed-up wall (CPU) | cost ours/Ceres − 1 | CHOLMOD floor [ms] | ours factorize/iter ÷ floor |")
-print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 order = {"Se3Graph": 0, "Sim3Drift": 1, "Ba": 2}
 
 
@@ -75,25 +68,70 @@ def sort_key(k):
     return (order[kind], int(num.group(1)) if num else which, threads)
 
 
+def cpu(b):
+    return b.get("total_cpu_ms", b["cpu_time"])
+
+
+def solver_of(b):
+    return b.get("label", "").split(":")[0] or "?"
+
+
+print("| problem | threads | ours: solver | wall [ms] | CPU [ms] | iters | CPU ms/iter | final cost "
+      "| reach: iter | wall [ms] | CPU [ms] "
+      "| Ceres: wall [ms] | CPU [ms] | iters | CPU ms/iter | final cost "
+      "| speed-up to convergence wall (CPU) | speed-up to reach wall (CPU) | cost ours/Ceres − 1 |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 for k in sorted(cases, key=sort_key):
     kind, which, threads = k
-    o, c = cases[k].get("Ours"), cases[k].get("Ceres")
-    fl = floors.get((kind, which))
-    cells = [f"{kind} {which}", str(threads)]
-    for b in (o, c):
-        if b:
-            cells += [fmt_ms(b["real_time"]), fmt_ms(b["cpu_time"]), str(int(b["lm_iterations"])),
-                      f"{b['time_per_iteration_ms']:.1f}", f"{b['final_cost']:.6g}"]
+    c = cases[k].get("Ceres")
+    for who in ("Ours", "OursCholmod"):
+        o = cases[k].get(who)
+        if not o:
+            continue
+        cells = [f"{kind} {which}", str(threads), solver_of(o)]
+        cells += [fmt_ms(o["real_time"]), fmt_ms(cpu(o)), str(int(o["lm_iterations"])),
+                  f"{cpu(o) / o['lm_iterations']:.1f}", f"{o['final_cost']:.6g}"]
+        if "reach_iterations" in o:
+            cells += [str(int(o["reach_iterations"])), fmt_ms(o["reach_ms"]),
+                      fmt_ms(o["reach_cpu_ms"])]
         else:
-            cells += ["–", "–", "–", "–", "–"]
-    if o and c:
-        cells += [f"{c['real_time'] / o['real_time']:.2f}× ({c['cpu_time'] / o['cpu_time']:.2f}×)",
-                  f"{o['final_cost'] / c['final_cost'] - 1:+.1e}"]
-    else:
-        cells += ["–", "–"]
-    if fl:
-        cells += [f"{fl['factor_ms']:.1f}",
-                  f"{o['factorize_ms'] / o['lm_iterations'] / fl['factor_ms']:.2f}" if o else "–"]
-    else:
-        cells += ["–", "–"]
-    print("| " + " | ".join(cells) + " |")
+            cells += ["–", "–", "–"]
+        if c:
+            cells += [fmt_ms(c["real_time"]), fmt_ms(cpu(c)), str(int(c["lm_iterations"])),
+                      f"{cpu(c) / c['lm_iterations']:.1f}", f"{c['final_cost']:.6g}",
+                      f"{c['real_time'] / o['real_time']:.2f}× ({cpu(c) / cpu(o):.2f}×)"]
+            if "reach_ms" in o:
+                cells += [f"{c['real_time'] / o['reach_ms']:.2f}× "
+                          f"({cpu(c) / o['reach_cpu_ms']:.2f}×)"]
+            else:
+                cells += ["–"]
+            cells += [f"{o['final_cost'] / c['final_cost'] - 1:+.1e}"]
+        else:
+            cells += ["–"] * 8
+        print("| " + " | ".join(cells) + " |")
+
+print()
+print("| problem | ours: solver | per iteration [ms] | factorize/iter [ms] | CHOLMOD floor [ms] "
+      "| CHOLMOD GFlop/s | block floor [ms] | block GFlop/s | CHOLMOD ÷ block floor "
+      "| iteration ÷ CHOLMOD floor | factorize/iter ÷ CHOLMOD floor |")
+print("|---|---|---|---|---|---|---|---|---|---|---|")
+for k in sorted(cases, key=sort_key):
+    kind, which, threads = k
+    fl = floors.get((kind, which))
+    if threads != 1 or not fl:
+        continue
+    for who in ("Ours", "OursCholmod"):
+        o = cases[k].get(who)
+        if not o:
+            continue
+        it = o["time_per_iteration_ms"]
+        fi = o["factorize_ms"] / o["lm_iterations"]
+        cells = [f"{kind} {which}", solver_of(o), f"{it:.1f}", f"{fi:.1f}",
+                 f"{fl['factor_ms']:.1f}", f"{fl['gflops']:.2f}"]
+        if "block_factor_ms" in fl:
+            cells += [f"{fl['block_factor_ms']:.1f}", f"{fl['block_gflops']:.2f}",
+                      f"{fl['factor_ms'] / fl['block_factor_ms']:.2f}×"]
+        else:
+            cells += ["–", "–", "–"]
+        cells += [f"{it / fl['factor_ms']:.2f}", f"{fi / fl['factor_ms']:.2f}"]
+        print("| " + " | ".join(cells) + " |")

@@ -388,6 +388,12 @@ TEST_CASE("Invalid options are rejected by validate with a message", "[solver]")
   o.min_lambda = 1.0;  // above initial_lambda
   CHECK_FALSE(o.validate(&why));
   CHECK_THAT(why, Catch::Contains("min_lambda"));
+  for (const double f : {0.0, 1.0, std::numeric_limits<double>::quiet_NaN()}) {
+    o = Options{};
+    o.lambda_decrease_limit = f;
+    CHECK_FALSE(o.validate(&why));
+    CHECK_THAT(why, Catch::Contains("lambda_decrease_limit"));
+  }
   o = Options{};
   o.min_diagonal = 10.0;
   o.max_diagonal = 1.0;

@@ -14,8 +14,9 @@
 ///
 /// λ update (gain ratio). ρ = (F(x) − F(x ⊞ δ)) / (L(0) − L(δ)) with the model decrease
 /// L(0) − L(δ) = ½·δᵀ(λ·D·δ − g). A step is accepted only if F decreases (ρ > 0); then
-/// λ ← λ·max(1/3, 1 − (2ρ − 1)³), ν ← 2; otherwise the states are restored and λ ← λ·ν,
-/// ν ← 2ν. Source: H.B. Nielsen, "Damping parameter in Marquardt's method", IMM-REP-1999-05,
+/// λ ← λ·max(f, 1 − (2ρ − 1)³), ν ← 2 (f = Options::lambda_decrease_limit: by default
+/// Nielsen's 1/3, optionally Marquardt's 1/10, see there); otherwise the states are restored and λ
+/// ← λ·ν, ν ← 2ν. Source: H.B. Nielsen, "Damping parameter in Marquardt's method", IMM-REP-1999-05,
 /// and K. Madsen, H.B. Nielsen, O. Tingleff, "Methods for non-linear least squares problems",
 /// 2nd ed., IMM DTU 2004, §3.2 (eq. 3.15 and Algorithm 3.16).
 ///
@@ -29,12 +30,15 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "geodrift/solver/block_cholesky_solver.hpp"
 #include "geodrift/solver/block_sparse_matrix.hpp"
 #include "geodrift/solver/cholmod_solver.hpp"
 #include "geodrift/solver/dense_solver.hpp"
@@ -44,12 +48,27 @@
 
 namespace geodrift::solver {
 
+/// LinearSolverType::kAuto uses the block Cholesky when L has at most this many blocks per block
+/// column on average. Measured (BENCHMARKS.md): the block Cholesky is faster than CHOLMOD on the
+/// drift graph (7 blocks per column) and on all four g2o graphs (parking-garage 7, cubicle 15,
+/// torus3D 17, sphere2500 21); beyond that CHOLMOD's dense supernodes (BLAS-3) are expected to
+/// win, so larger fill goes to CHOLMOD.
+inline constexpr double kAutoMaxBlocksPerColumn = 24.0;
+
 /// Which linear solver LM uses for the damped normal equations.
 enum class LinearSolverType {
   kCholmod,     ///< CHOLMOD supernodal Cholesky on the full H (general)
   kSchur,       ///< eliminate R^3 point blocks, CHOLMOD on the reduced camera system (BA)
   kDense,       ///< dense LLᵀ of H (tests, tiny problems)
   kSchurDense,  ///< Schur elimination, dense LLᵀ of the reduced camera system (tiny BA)
+  /// Block sparse Cholesky with fixed-size 6×6 / 7×7 kernels (block_cholesky_solver.hpp);
+  /// needs every free block of size 6 or 7 (SE(3) / Sim(3) pose graphs), else the solve stops
+  /// with kInvalidProblem.
+  kBlockCholesky,
+  /// kBlockCholesky when every free block has size 6 or 7 and its factor is thin (chain-like
+  /// graphs: at most kAutoMaxBlocksPerColumn blocks per column of L on average), otherwise
+  /// kCholmod. Decided at each symbolic analysis.
+  kAuto,
 };
 
 /// LM options; every member has a default.
@@ -65,6 +84,17 @@ struct Options {
   double parameter_tolerance = 1e-8;
   /// Initial damping λ (relative to the scaled diagonal; 1e-4 = Ceres' initial radius 1e4).
   double initial_lambda = 1e-4;
+  /// Smallest factor an accepted step multiplies λ by: λ ← λ·max(lambda_decrease_limit,
+  /// 1 − (2ρ − 1)³). Default 1/3: Nielsen's rule (as Ceres and g2o). 1/10 is Marquardt's
+  /// original decrease factor (D. W. Marquardt, "An algorithm for least-squares estimation of
+  /// nonlinear parameters", SIAM J. Appl. Math. 11(2), 1963: λ/ν with ν = 10; also GTSAM's
+  /// lambdaFactor) as the limit for very good steps (ρ → 1), Nielsen's smooth rule otherwise.
+  /// Measured from the same starts with 1/10 (bench_solver sets it, BENCHMARKS.md): Sim3 drift
+  /// 10k 14 → 10 iterations, sphere2500 10 → 7, parking-garage 14 → 9, cubicle 47 → 46,
+  /// torus3D 99 = 99. Not the default: on the ill-conditioned 3-camera BAL subset (cond(H) ≈
+  /// 3e7) it stops (parameter tolerance) where |g|/λ_min(H) = 2.3e-5, above the 1e-5 that the
+  /// solver_data test asks of every linear solver.
+  double lambda_decrease_limit = 1.0 / 3.0;
   /// Stop (no step can decrease the cost) when λ exceeds this.
   double max_lambda = 1e32;
   /// λ never drops below this (as Ceres' max trust-region radius 1e16), so that a rejected
@@ -73,7 +103,14 @@ struct Options {
   /// Clamp of the Jacobi-scaled diagonal used for damping (as Ceres' min/max_lm_diagonal).
   double min_diagonal = 1e-6;
   double max_diagonal = 1e32;
-  LinearSolverType linear_solver = LinearSolverType::kCholmod;
+  /// kAuto: the block Cholesky for thin 6/7-block pose graphs, CHOLMOD otherwise; BA wants
+  /// kSchur (set it explicitly).
+  LinearSolverType linear_solver = LinearSolverType::kAuto;
+  /// After an accepted step, evaluate the next trial point with Jacobians into a second copy of
+  /// H and g (its cost decides the step as usual): when the step is accepted again, which is
+  /// the common case, the separate cost-only evaluation is saved. After a rejection trial points
+  /// are evaluated cost-only. Same steps either way; costs one more H in memory.
+  bool speculative_linearization = true;
   /// Threads for evaluation and assembly: 1 or 2 (2 splits the residual blocks whose H blocks
   /// fall in disjoint column halves; the rest run on one thread).
   int num_threads = 1;
@@ -102,6 +139,8 @@ struct Options {
       os << "max_lambda " << max_lambda << " < initial_lambda " << initial_lambda;
     else if (!(min_lambda >= 0.0) || !(min_lambda <= initial_lambda))
       os << "min_lambda " << min_lambda << " not in [0, initial_lambda " << initial_lambda << "]";
+    else if (!(lambda_decrease_limit > 0.0) || !(lambda_decrease_limit < 1.0))
+      os << "lambda_decrease_limit " << lambda_decrease_limit << " not in (0, 1)";
     else if (!(min_diagonal > 0.0) || !(max_diagonal >= min_diagonal))
       os << "diagonal clamp [" << min_diagonal << ", " << max_diagonal << "] is not 0 < min <= max";
     else if (num_threads != 1 && num_threads != 2)
@@ -159,6 +198,16 @@ inline const char* to_string(Termination t) {
   return "?";
 }
 
+/// State after one LM iteration (Summary::trace).
+struct IterationRecord {
+  int iteration = 0;       ///< 0 = the start, then 1, 2, ... (linear solves)
+  double cost = 0.0;       ///< cost at the current (best accepted) point after the iteration
+  bool accepted = false;   ///< whether this iteration's step was accepted
+  double lambda = 0.0;     ///< damping used by this iteration's step
+  double time_wall = 0.0;  ///< seconds since solve() started (steady clock)
+  double time_cpu = 0.0;   ///< process CPU seconds since solve() started (std::clock)
+};
+
 /// What happened in one solve.
 struct Summary {
   Termination termination = Termination::kInvalidOptions;
@@ -179,6 +228,10 @@ struct Summary {
   double time_factorize = 0.0;  ///< numeric factorisation (incl. Schur elimination) [s]
   double time_solve = 0.0;      ///< triangular solves / back-substitution [s]
   double time_total = 0.0;      ///< whole solve() [s]
+  double time_total_cpu = 0.0;  ///< whole solve(), process CPU time (std::clock) [s]
+  /// One record for the start and one per iteration (first iteration reaching a given cost,
+  /// convergence profiles). Reserved before the loop for up to 1000 iterations.
+  std::vector<IterationRecord> trace;
 
   /// Converged by one of the tolerance criteria (or zero cost).
   bool converged() const {
@@ -219,12 +272,25 @@ class LevenbergMarquardt {
   Summary solve(Problem* problem) {
     using Clock = std::chrono::steady_clock;
     const auto t_start = Clock::now();
+    const std::clock_t c_start = std::clock();
     Summary sum;
+    sum.trace.reserve(static_cast<std::size_t>(std::min(options_.max_iterations, 1000) + 1));
     const auto finish = [&](Termination t, std::string msg) {
       sum.termination = t;
       sum.message = std::move(msg);
       sum.time_total = std::chrono::duration<double>(Clock::now() - t_start).count();
+      sum.time_total_cpu = static_cast<double>(std::clock() - c_start) / CLOCKS_PER_SEC;
       return sum;
+    };
+    const auto record = [&](double cost, bool accepted, double lambda) {
+      IterationRecord r;
+      r.iteration = sum.iterations;
+      r.cost = cost;
+      r.accepted = accepted;
+      r.lambda = lambda;
+      r.time_wall = std::chrono::duration<double>(Clock::now() - t_start).count();
+      r.time_cpu = static_cast<double>(std::clock() - c_start) / CLOCKS_PER_SEC;
+      sum.trace.push_back(r);
     };
     std::string why;
     if (!options_.validate(&why)) return finish(Termination::kInvalidOptions, why);
@@ -240,8 +306,10 @@ class LevenbergMarquardt {
     sum.num_residuals = problem->num_residuals();
 
     // Linear solver + symbolic analysis (reused while the pattern is the same).
+    if (options_.linear_solver == LinearSolverType::kAuto && analyzed_ && !s.same_pattern(pattern_))
+      solver_.reset();  // kAuto decides again for a new pattern
     if (!solver_) {
-      solver_ = make_solver(options_.linear_solver);
+      solver_ = make_solver(resolve(options_.linear_solver, s));
       analyzed_ = false;
     }
     sum.linear_solver = solver_->name();
@@ -251,7 +319,12 @@ class LevenbergMarquardt {
       sum.time_analyze = std::chrono::duration<double>(Clock::now() - t0).count();
       if (st != LinearSolverStatus::kSuccess) {
         analyzed_ = false;
-        return finish(Termination::kLinearSolverFailure, solver_->message());
+        const std::string m = solver_->message();
+        const bool structural = options_.linear_solver == LinearSolverType::kBlockCholesky &&
+                                BlockCholeskySolver::supported_block_size(s) == 0;
+        solver_.reset();
+        return finish(structural ? Termination::kInvalidProblem : Termination::kLinearSolverFailure,
+                      m);
       }
       pattern_ = s.pattern();
       analyzed_ = true;
@@ -260,6 +333,13 @@ class LevenbergMarquardt {
     // Buffers (sized once).
     H_.reset(&s);
     g_.resize(n);
+    if (options_.speculative_linearization) {
+      H2_.reset(&s);
+      g2_.resize(n);
+    } else {
+      H2_ = BlockSparseMatrix();
+      g2_.resize(0);
+    }
     diag_.resize(n);
     damp_.resize(n);
     rhs_.resize(n);
@@ -281,6 +361,7 @@ class LevenbergMarquardt {
       return finish(Termination::kNonFiniteResidual, "at the initial point: " + err.what);
     }
     sum.initial_cost = sum.final_cost = cost;
+    record(cost, true, 0.0);
     if (!g_.allFinite()) {
       problem->find_non_finite_jacobian(&err);
       return finish(Termination::kNonFiniteJacobian, "at the initial point: " + err.what);
@@ -288,7 +369,7 @@ class LevenbergMarquardt {
     if (n == 0) return finish(Termination::kGradientTolerance, "no free parameters");
 
     double lambda = options_.initial_lambda, nu = 2.0;
-    bool relinearized = true;
+    bool relinearized = true, last_accepted = true, speculated = false;
     while (true) {
       if (cost == 0.0) return done(sum, cost, lambda, Termination::kZeroCost, "", finish);
       if (relinearized) {
@@ -346,9 +427,20 @@ class LevenbergMarquardt {
         model *= 0.5;
         problem->save_state();
         problem->plus(delta_.data());
-        const auto te = Clock::now();
-        const bool eval_ok = problem->evaluate_cost(&new_cost);
-        sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        bool eval_ok;
+        speculated = options_.speculative_linearization && last_accepted;
+        if (speculated) {
+          // Linearise the trial point into the spare buffers: its cost decides the step, and
+          // if it is accepted H, g are ready (the buffers are swapped, no second evaluation).
+          LinearizeTimes lt2;
+          eval_ok = problem->linearize(&H2_, g2_.data(), &new_cost, &lt2, &err);
+          sum.time_evaluate += lt2.evaluate;
+          sum.time_assemble += lt2.assemble;
+        } else {
+          const auto te = Clock::now();
+          eval_ok = problem->evaluate_cost(&new_cost);
+          sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        }
         if (eval_ok && std::isfinite(new_cost) && new_cost < cost && model > 0.0) {
           rho = (cost - new_cost) / model;
         } else {
@@ -360,24 +452,32 @@ class LevenbergMarquardt {
         std::printf("LM it %3d cost %.12g new %.12g rho %.3g lambda %.3g\n", sum.iterations, cost,
                     new_cost, rho, lambda);
       }
+      record(rho > 0.0 ? new_cost : cost, rho > 0.0, lambda);
+      last_accepted = rho > 0.0;
       if (rho > 0.0) {
         ++sum.successful_steps;
         const double old_cost = cost;
         cost = new_cost;
         const double t = 2.0 * rho - 1.0;
-        lambda = std::max(options_.min_lambda, lambda * std::max(1.0 / 3.0, 1.0 - t * t * t));
+        lambda = std::max(options_.min_lambda,
+                          lambda * std::max(options_.lambda_decrease_limit, 1.0 - t * t * t));
         nu = 2.0;
         if (old_cost - new_cost <= options_.function_tolerance * old_cost) {
           return done(sum, cost, lambda, Termination::kFunctionTolerance,
                       "relative decrease " + num((old_cost - new_cost) / old_cost), finish);
         }
-        LinearizeTimes lt2;
-        double c2 = 0.0;
-        ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err);
-        sum.time_evaluate += lt2.evaluate;
-        sum.time_assemble += lt2.assemble;
-        if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
-          return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
+        if (speculated) {
+          std::swap(H_, H2_);
+          g_.swap(g2_);
+        } else {
+          LinearizeTimes lt2;
+          double c2 = 0.0;
+          ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err);
+          sum.time_evaluate += lt2.evaluate;
+          sum.time_assemble += lt2.assemble;
+          if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
+            return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
+        }
         if (!g_.allFinite()) {
           problem->find_non_finite_jacobian(&err);
           return done(sum, cost, lambda, Termination::kNonFiniteJacobian, err.what, finish);
@@ -424,16 +524,29 @@ class LevenbergMarquardt {
         return std::make_unique<DenseSolver>();
       case LinearSolverType::kSchurDense:
         return std::make_unique<SchurSolver>(std::make_unique<DenseSolver>());
+      case LinearSolverType::kBlockCholesky:
+        return std::make_unique<BlockCholeskySolver>();
+      case LinearSolverType::kAuto:
+        break;
     }
     return std::make_unique<CholmodSolver>();
+  }
+
+  /// kAuto's choice for structure s (see LinearSolverType::kAuto); other types unchanged.
+  static LinearSolverType resolve(LinearSolverType t, const BlockStructure& s) {
+    if (t != LinearSolverType::kAuto) return t;
+    if (BlockCholeskySolver::supported_block_size(s) == 0) return LinearSolverType::kCholmod;
+    return BlockCholeskySolver::thin_factor(s, kAutoMaxBlocksPerColumn)
+               ? LinearSolverType::kBlockCholesky
+               : LinearSolverType::kCholmod;
   }
 
   Options options_;
   std::unique_ptr<LinearSolver> solver_;
   bool analyzed_ = false;
   BlockStructure::Pattern pattern_;
-  BlockSparseMatrix H_;
-  Eigen::VectorXd g_, diag_, damp_, rhs_, delta_;
+  BlockSparseMatrix H_, H2_;
+  Eigen::VectorXd g_, g2_, diag_, damp_, rhs_, delta_;
 };
 
 }  // namespace geodrift::solver

@@ -1,0 +1,386 @@
+#pragma once
+
+/// @file
+/// BlockCholeskySolver: sparse Cholesky LLᵀ of H on its BLOCK pattern with fixed-size dense
+/// kernels, for problems whose free parameter blocks all have the same size B ∈ {6, 7} (SE(3) /
+/// Sim(3) pose graphs).
+///
+/// Why. On chain-shaped graphs (odometry + a few neighbours, the monocular-drift Sim(3) graph)
+/// the factor has no fill beyond a narrow block band and CHOLMOD's supernodes are tiny, so its
+/// per-supernode bookkeeping and BLAS calls on 7×7…42×42 panels dominate (≈ 1 GFlop/s). Here
+/// every operation is a B×B product with compile-time sizes (Eigen fixed-size kernels, no BLAS
+/// call, no index arithmetic inside a block).
+///
+/// Algorithm (works on any block pattern, not only bands).
+///  - analyze(): ordering of the block graph = the better (fewer factorisation flops) of the
+///    natural order and AMD (Eigen's AMDOrdering on the block pattern); block elimination tree
+///    and column structures of L by the usual symbolic Cholesky (struct(L_j) = adj⁺(j) ∪
+///    ⋃_{children c} struct(L_c) \ {c}); for every stored block of H its slot in L (and whether
+///    it lands transposed). Runs once per pattern.
+///  - factorize(): left-looking block Cholesky (column j gathers L_ij −= L_ik·L_jkᵀ from the
+///    columns k whose next row is j, linked lists as in CSparse's cs_chol, T. Davis, "Direct
+///    Methods for Sparse Linear Systems", SIAM 2006, ch. 4), then L_jj = chol(H_jj − …) and
+///    L_ij ← L_ij·L_jj⁻ᵀ with the explicit inverse of the B×B triangle, kept for the solves.
+///    A diagonal block that is not positive definite (or not finite) returns
+///    kNotPositiveDefinite (LM rejects the step), never throws. No allocation.
+///  - solve(): block forward / backward substitution with the stored inverses.
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCore>
+#include <algorithm>
+#include <memory>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "geodrift/solver/linear_solver.hpp"
+
+namespace geodrift::solver {
+
+namespace detail {
+
+/// Symbolic block factor shared by the fixed-size kernels.
+struct BlockSymbolic {
+  int nb = 0;                  ///< block columns
+  std::vector<int> perm;       ///< new position -> original block
+  std::vector<int> inv;        ///< original block -> new position
+  std::vector<int> col_ptr;    ///< L block CSC (lower, first row of column j is j)
+  std::vector<int> row;        ///< row blocks (new numbering), ascending per column
+  std::vector<int> src_slot;   ///< per stored H block (BlockStructure order): its slot in L
+  std::vector<char> src_tr;    ///< ... and whether it is stored transposed there
+  std::vector<char> src_diag;  ///< ... and whether it is a diagonal block
+  double flops = 0.0;          ///< factorisation flops (B×B GEMM = 2B³)
+
+  /// L's column structure for ordering `perm` of the block graph given as symmetric lower
+  /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry.
+  static double build(const BlockStructure& s, const std::vector<int>& perm, int B,
+                      BlockSymbolic* out) {
+    const int nb = s.num_blocks();
+    std::vector<int> inv(nb);
+    for (int q = 0; q < nb; ++q) inv[perm[q]] = q;
+    // Lower adjacency in the new numbering (CSR by column j: rows i > j).
+    std::vector<int> cnt(nb + 1, 0);
+    const auto& bcp = s.block_col_ptr();
+    const auto& brow = s.block_rows();
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        if (brow[k] != b) ++cnt[std::min(inv[brow[k]], inv[b]) + 1];
+    for (int j = 0; j < nb; ++j) cnt[j + 1] += cnt[j];
+    std::vector<int> adj(cnt[nb]), fillp(cnt.begin(), cnt.end() - 1);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        if (brow[k] != b) {
+          const int i = inv[brow[k]], j = inv[b];
+          adj[fillp[std::min(i, j)]++] = std::max(i, j);
+        }
+    // Column structures, children lists through the elimination tree.
+    std::vector<int> col_ptr(nb + 1, 0), rows;
+    rows.reserve(static_cast<std::size_t>(cnt[nb] + nb) * 2);
+    std::vector<int> mark(nb, -1), child_head(nb, -1), child_next(nb, -1);
+    double cost = 0.0, flops = 0.0;
+    const double gemm = 2.0 * B * B * B;
+    for (int j = 0; j < nb; ++j) {
+      const std::size_t start = rows.size();
+      rows.push_back(j);
+      mark[j] = j;
+      for (int p = cnt[j]; p < cnt[j + 1]; ++p)
+        if (mark[adj[p]] != j) {
+          mark[adj[p]] = j;
+          rows.push_back(adj[p]);
+        }
+      for (int c = child_head[j]; c >= 0; c = child_next[c])
+        for (int p = col_ptr[c] + 1; p < col_ptr[c + 1]; ++p) {
+          const int i = rows[p];
+          if (i != j && mark[i] != j) {
+            mark[i] = j;
+            rows.push_back(i);
+          }
+        }
+      std::sort(rows.begin() + static_cast<std::ptrdiff_t>(start) + 1, rows.end());
+      col_ptr[j + 1] = static_cast<int>(rows.size());
+      const double m = static_cast<double>(rows.size() - start - 1);  // off-diagonal blocks
+      cost += (m + 1.0) * (m + 1.0);
+      flops += gemm * (m * (m + 1.0) / 2.0 + m) + 2.0 * B * B * B / 3.0;
+      if (m > 0) {
+        const int parent = rows[start + 1];
+        child_next[j] = child_head[parent];
+        child_head[parent] = j;
+      }
+    }
+    if (!out) return cost;
+    out->nb = nb;
+    out->perm = perm;
+    out->inv = std::move(inv);
+    out->col_ptr = std::move(col_ptr);
+    out->row = std::move(rows);
+    out->flops = flops;
+    // Slot of every stored block of H.
+    const std::size_t nh = brow.size();
+    out->src_slot.assign(nh, -1);
+    out->src_tr.assign(nh, 0);
+    out->src_diag.assign(nh, 0);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) {
+        const int ia = out->inv[brow[k]], ib = out->inv[b];
+        const int i = std::max(ia, ib), j = std::min(ia, ib);
+        const auto first = out->row.begin() + out->col_ptr[j];
+        const auto last = out->row.begin() + out->col_ptr[j + 1];
+        const auto it = std::lower_bound(first, last, i);
+        out->src_slot[k] = static_cast<int>(it - out->row.begin());
+        out->src_diag[k] = brow[k] == b;
+        // H_ab has a's rows; L(i, j) has block i's rows: transposed when a is the column.
+        out->src_tr[k] = ia < ib;
+      }
+    return cost;
+  }
+};
+
+class BlockFactorBase {
+ public:
+  virtual ~BlockFactorBase() = default;
+  virtual void setup(const BlockSymbolic* sym) = 0;
+  /// 0 on success, else 1 + the (new-numbering) block column that is not positive definite.
+  virtual int factorize(const BlockStructure& s, const double* values) = 0;
+  virtual void solve(const double* b, double* x) = 0;
+};
+
+template <int B>
+class BlockFactor final : public BlockFactorBase {
+ public:
+  using Mat = Eigen::Matrix<double, B, B>;
+  using Vec = Eigen::Matrix<double, B, 1>;
+  using ConstMap = Eigen::Map<const Mat, 0, Eigen::OuterStride<>>;
+
+  void setup(const BlockSymbolic* sym) override {
+    sym_ = sym;
+    L_.assign(sym->row.size(), Mat::Zero());
+    Linv_.assign(static_cast<std::size_t>(sym->nb), Mat::Zero());
+    y_.assign(static_cast<std::size_t>(sym->nb), Vec::Zero());
+    slot_of_row_.assign(static_cast<std::size_t>(sym->nb), -1);
+    head_.assign(static_cast<std::size_t>(sym->nb), -1);
+    next_.assign(static_cast<std::size_t>(sym->nb), -1);
+    ptr_.assign(static_cast<std::size_t>(sym->nb), -1);
+  }
+
+  int factorize(const BlockStructure& s, const double* values) override {
+    const BlockSymbolic& S = *sym_;
+    const int nb = S.nb;
+    const int* cp = S.col_ptr.data();
+    const int* rw = S.row.data();
+    // Load H into L's slots (L is zero outside the pattern of H).
+    for (auto& m : L_) m.setZero();
+    const auto& bcp = s.block_col_ptr();
+    const auto& boff = s.block_offsets();
+    for (int b = 0; b < nb; ++b) {
+      const int h = s.column_height(b);
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) {
+        const ConstMap A(values + boff[k], B, B, Eigen::OuterStride<>(h));
+        Mat& dst = L_[static_cast<std::size_t>(S.src_slot[k])];
+        if (S.src_diag[k])
+          dst = A.template selfadjointView<Eigen::Upper>();
+        else if (S.src_tr[k])
+          dst = A.transpose();
+        else
+          dst = A;
+      }
+    }
+    std::fill(head_.begin(), head_.end(), -1);
+    for (int j = 0; j < nb; ++j) {
+      for (int p = cp[j]; p < cp[j + 1]; ++p) slot_of_row_[rw[p]] = p;
+      // Updates from every column k with L_jk ≠ 0 (k < j).
+      for (int k = head_[j]; k >= 0;) {
+        const int nk = next_[k];
+        const int p = ptr_[k];
+        const Mat LjkT = L_[p].transpose();
+        for (int q = p; q < cp[k + 1]; ++q) L_[slot_of_row_[rw[q]]].noalias() -= L_[q] * LjkT;
+        if (p + 1 < cp[k + 1]) {
+          ptr_[k] = p + 1;
+          const int i = rw[p + 1];
+          next_[k] = head_[i];
+          head_[i] = k;
+        }
+        k = nk;
+      }
+      // Diagonal block.
+      Mat& D = L_[cp[j]];
+      if (!D.allFinite()) return j + 1;
+      Eigen::LLT<Mat> llt(D);
+      if (llt.info() != Eigen::Success) return j + 1;
+      Mat& Li = Linv_[j];
+      Li.setIdentity();
+      llt.matrixL().solveInPlace(Li);
+      if (!Li.allFinite()) return j + 1;
+      D = llt.matrixL();
+      const Mat LiT = Li.transpose();
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) {
+        const Mat t = L_[p] * LiT;
+        L_[p] = t;
+      }
+      if (cp[j] + 1 < cp[j + 1]) {
+        ptr_[j] = cp[j] + 1;
+        const int i = rw[cp[j] + 1];
+        next_[j] = head_[i];
+        head_[i] = j;
+      }
+    }
+    return 0;
+  }
+
+  void solve(const double* b, double* x) override {
+    const BlockSymbolic& S = *sym_;
+    const int nb = S.nb;
+    const int* cp = S.col_ptr.data();
+    const int* rw = S.row.data();
+    for (int j = 0; j < nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * S.perm[j]);
+    for (int j = 0; j < nb; ++j) {
+      const Vec yj = Linv_[j] * y_[j];
+      y_[j] = yj;
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) y_[rw[p]].noalias() -= L_[p] * yj;
+    }
+    for (int j = nb - 1; j >= 0; --j) {
+      Vec t = y_[j];
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) t.noalias() -= L_[p].transpose() * y_[rw[p]];
+      y_[j].noalias() = Linv_[j].transpose() * t;
+    }
+    for (int j = 0; j < nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
+  }
+
+ private:
+  const BlockSymbolic* sym_ = nullptr;
+  std::vector<Mat, Eigen::aligned_allocator<Mat>> L_, Linv_;
+  std::vector<Vec, Eigen::aligned_allocator<Vec>> y_;
+  std::vector<int> slot_of_row_, head_, next_, ptr_;
+};
+
+}  // namespace detail
+
+/// Block sparse Cholesky with B×B fixed-size kernels (see the file comment).
+class BlockCholeskySolver final : public LinearSolver {
+ public:
+  enum class Ordering {
+    kBest,     ///< natural or AMD, whichever needs fewer flops (default)
+    kNatural,  ///< the problem's block order
+    kAmd,      ///< AMD on the block pattern
+  };
+  explicit BlockCholeskySolver(Ordering ordering = Ordering::kBest) : ordering_(ordering) {}
+
+  /// The common block size if every block of `s` has the same size 6 or 7 and nothing is
+  /// Schur-eliminated; 0 otherwise (then this solver cannot be used).
+  static int supported_block_size(const BlockStructure& s) {
+    if (s.num_blocks() == 0 || s.num_eliminated() != 0) return 0;
+    const int B = s.block_size(0);
+    if (B != 6 && B != 7) return 0;
+    for (int b = 1; b < s.num_blocks(); ++b)
+      if (s.block_size(b) != B) return 0;
+    return B;
+  }
+
+  /// Whether block Cholesky suits `s`: a supported block size and, with the ordering analyze()
+  /// would choose, at most `max_blocks_per_column` blocks per column of L on average.
+  static bool thin_factor(const BlockStructure& s, double max_blocks_per_column) {
+    if (supported_block_size(s) == 0) return false;
+    const std::vector<int> perm = choose_order(s, Ordering::kBest);
+    detail::BlockSymbolic sym;
+    detail::BlockSymbolic::build(s, perm, s.block_size(0), &sym);
+    return static_cast<double>(sym.row.size()) <= max_blocks_per_column * s.num_blocks();
+  }
+
+  LinearSolverStatus analyze(const BlockStructure& s) override {
+    message_.clear();
+    factor_.reset();
+    B_ = supported_block_size(s);
+    if (B_ == 0) {
+      message_ =
+          "block Cholesky: needs every free parameter block of size 6 or 7 and no Schur "
+          "elimination";
+      return LinearSolverStatus::kFatal;
+    }
+    detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
+    if (B_ == 6)
+      factor_ = std::make_unique<detail::BlockFactor<6>>();
+    else
+      factor_ = std::make_unique<detail::BlockFactor<7>>();
+    factor_->setup(&sym_);
+    n_ = s.num_cols();
+    return LinearSolverStatus::kSuccess;
+  }
+
+  LinearSolverStatus factorize(const BlockSparseMatrix& H) override {
+    message_.clear();
+    if (!factor_) {
+      message_ = "block Cholesky: factorize() before analyze()";
+      return LinearSolverStatus::kFatal;
+    }
+    if (H.rows() != n_) {
+      message_ = "block Cholesky: matrix size differs from the analysed one";
+      return LinearSolverStatus::kFatal;
+    }
+    const int bad = factor_->factorize(H.structure(), H.values());
+    if (bad != 0) {
+      message_ = "block Cholesky: matrix not positive definite (block " +
+                 std::to_string(sym_.perm[bad - 1]) + ")";
+      return LinearSolverStatus::kNotPositiveDefinite;
+    }
+    return LinearSolverStatus::kSuccess;
+  }
+
+  LinearSolverStatus solve(const double* b, double* x) override {
+    message_.clear();
+    factor_->solve(b, x);
+    return LinearSolverStatus::kSuccess;
+  }
+
+  std::string name() const override { return "block-cholesky"; }
+  double factor_nnz() const override {
+    if (!factor_) return 0.0;
+    const double off = static_cast<double>(sym_.row.size()) - sym_.nb;
+    return off * B_ * B_ + static_cast<double>(sym_.nb) * B_ * (B_ + 1) / 2.0;
+  }
+  /// Flops of one numeric factorisation (after analyze()).
+  double flops() const { return factor_ ? sym_.flops : 0.0; }
+  /// Block ordering chosen by analyze(): position -> block.
+  const std::vector<int>& permutation() const { return sym_.perm; }
+
+ private:
+  static std::vector<int> choose_order(const BlockStructure& s, Ordering ordering) {
+    const int nb = s.num_blocks();
+    std::vector<int> natural(nb);
+    std::iota(natural.begin(), natural.end(), 0);
+    if (ordering == Ordering::kNatural) return natural;
+    std::vector<int> amd = amd_order(s);
+    if (ordering == Ordering::kAmd) return amd;
+    const int B = s.block_size(0);
+    return detail::BlockSymbolic::build(s, amd, B, nullptr) <
+                   detail::BlockSymbolic::build(s, natural, B, nullptr)
+               ? amd
+               : natural;
+  }
+
+  static std::vector<int> amd_order(const BlockStructure& s) {
+    const int nb = s.num_blocks();
+    std::vector<Eigen::Triplet<double>> t;
+    t.reserve(2 * s.block_rows().size());
+    for (int b = 0; b < nb; ++b)
+      for (int k = s.block_col_ptr()[b]; k < s.block_col_ptr()[b + 1]; ++k) {
+        t.emplace_back(s.block_rows()[k], b, 1.0);
+        t.emplace_back(b, s.block_rows()[k], 1.0);
+      }
+    Eigen::SparseMatrix<double, Eigen::ColMajor, int> A(nb, nb);
+    A.setFromTriplets(t.begin(), t.end());
+    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P;
+    Eigen::AMDOrdering<int> amd;
+    amd(A, P);
+    // Eigen returns the inverse permutation (SimplicialCholesky inverts it before twistedBy):
+    // indices()[new position] = old block.
+    return std::vector<int>(P.indices().data(), P.indices().data() + nb);
+  }
+
+  Ordering ordering_;
+  int B_ = 0, n_ = 0;
+  detail::BlockSymbolic sym_;
+  std::unique_ptr<detail::BlockFactorBase> factor_;
+};
+
+}  // namespace geodrift::solver
