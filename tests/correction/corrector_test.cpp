@@ -158,3 +158,35 @@ TEST_CASE("Corrector refuses bad input with a message naming it", "[correction]"
   bad.lambda1 = -1;
   CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("lambda"));
 }
+
+TEST_CASE("The first window after INIT reaches back to the first keyframe", "[correction]") {
+  // Anchors at keyframes 10, 20, 30, 40 (INIT), then 60, 75, 89: the first window holds the
+  // correspondences at 30, 40, 60. With the paper's window it starts at keyframe 30 and
+  // keyframes 0-29 keep INIT's similarity; by default it starts at keyframe 0.
+  const ExactScene s = make_exact_scene(90, {10, 20, 30, 40, 60, 75, 89});
+  for (bool from_start : {true, false}) {
+    correction::CorrectorOptions opt;
+    opt.first_window_from_start = from_start;
+    correction::Corrector c(opt);
+    feed(&c, s);
+    INFO("first_window_from_start " << from_start);
+    std::vector<int> pgo_first, ba_first;
+    for (const auto& r : c.reports()) {
+      if (r.kind == "pgo") pgo_first.push_back(r.window_first_keyframe);
+      if (r.kind == "ba") ba_first.push_back(r.window_first_keyframe);
+    }
+    const std::vector<int> expected = {from_start ? 0 : 30, 40, 60};
+    CHECK(pgo_first == expected);
+    CHECK(ba_first == expected);
+    CHECK(mean_2d_error(c, s) < 1e-3);
+  }
+}
+
+TEST_CASE("Corrector validates the BA point and stopping options", "[correction]") {
+  correction::CorrectorOptions bad;
+  bad.ba_min_parallax_deg = 90;
+  CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_min_parallax_deg"));
+  bad = {};
+  bad.ba_cost_tolerance_sd = -1;
+  CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_cost_tolerance_sd"));
+}
