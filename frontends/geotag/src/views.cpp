@@ -165,7 +165,8 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
     fs::path p(f[c_file]);
     if (p.is_relative()) {
       fs::path a = folder / p;
-      if (!fs::exists(a) && fs::exists(folder / "panoramas" / p)) a = folder / "panoramas" / p;
+      for (const char* sub : {"panoramas", "images"})
+        if (!fs::exists(a) && fs::exists(folder / sub / p)) a = folder / sub / p;
       p = a;
     }
     s.path = p.lexically_normal().string();

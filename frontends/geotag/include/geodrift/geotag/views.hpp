@@ -12,7 +12,7 @@
 /// Geo-tag CSV (read_geotag_csv()): a header row, then one row per source. Columns, by name, in
 /// any order (aliases in brackets):
 ///   file [image]                      image path, relative to the CSV's folder or absolute;
-///                                     panoramas are also looked up in <folder>/panoramas/
+///                                     also looked up in <folder>/panoramas/ and <folder>/images/
 ///   latitude [latitude_deg], longitude [longitude_deg]   WGS84 degrees
 ///   height [altitude_m]               metres; `height` is ellipsoidal (DESIGN.md); altitude_m
 ///                                     (a phone's GPS altitude) is taken as given
