@@ -125,6 +125,7 @@ std::vector<map::Correspondence> GeoLocalizer::process(
     a.pairs_3d = static_cast<int>(X.size());
     a.result = localize_view(X, uv, db_.views()[r.view].camera, options_.localize);
     if (a.result.ok) {
+      a.correspondence = next_id_;
       out.push_back(make_correspondence(next_id_++, db_.views()[r.view], kf.keyframe, a.result,
                                         frame_, options_.sigma_m));
       localized_.insert(r.view);

@@ -64,6 +64,7 @@ struct ViewAttempt {
   int kept = 0;      ///< after K-VLD (= putative when K-VLD is off)
   int pairs_3d = 0;  ///< kept matches with a map point
   LocalizeResult result;
+  int correspondence = -1;  ///< Correspondence::id when the view localized, else -1
 };
 
 class GeoLocalizer {
