@@ -15,6 +15,12 @@
 #else
 #define GEODRIFT_CLI_HAS_EXPERIMENT 0
 #endif
+// geodrift render exists when geodrift::render is built (it needs OpenCV).
+#if __has_include(<geodrift/render/dataset.hpp>)
+#define GEODRIFT_CLI_HAS_RENDER 1
+#else
+#define GEODRIFT_CLI_HAS_RENDER 0
+#endif
 
 namespace {
 
@@ -31,6 +37,10 @@ const Subcommand kSubcommands[] = {
     {"eval", geodrift::cli::run_eval, "compare a corrected trajectory with ground truth"},
     {"simulate", geodrift::cli::run_simulate,
      "simulate monocular SLAM output (drifted trajectory, map, anchors) on KITTI"},
+#if GEODRIFT_CLI_HAS_RENDER
+    {"render", geodrift::cli::run_render,
+     "render a street-world dataset (frames + panoramas) on a KITTI path"},
+#endif
 #if GEODRIFT_CLI_HAS_EXPERIMENT
     {"experiment", geodrift::cli::run_experiment, "regenerate the paper's KITTI experiment"},
 #endif
