@@ -1,0 +1,57 @@
+#pragma once
+/// @file
+/// ORB features spread over the image: OpenCV's ORB pyramid detector, then a grid selection
+/// (strongest responses per cell first, as ORB-SLAM's distribution step intends), so texture-
+/// rich corners do not take the whole budget.
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
+#include <vector>
+
+namespace geodrift::vo {
+
+struct OrbOptions {
+  int num_features = 2000;    ///< kept after the grid selection
+  float scale_factor = 1.2f;  ///< pyramid scale between levels
+  int num_levels = 8;         ///< pyramid levels
+  int fast_threshold = 12;    ///< FAST threshold (grey levels)
+  int cell_size = 40;         ///< grid cell, level-0 pixels
+  int oversample = 3;         ///< detector budget = oversample * num_features
+};
+
+/// Keypoints (cv::KeyPoint: pixel, size, angle, octave) and their 256-bit descriptors
+/// (rows of a CV_8UC1 N x 32 matrix).
+struct Features {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+};
+
+class OrbExtractor {
+ public:
+  explicit OrbExtractor(const OrbOptions& options = {});
+  /// Features of an 8-bit grayscale image; empty for a black or textureless image.
+  Features extract(const cv::Mat& gray) const;
+  const OrbOptions& options() const { return options_; }
+  /// Scale of pyramid level `octave` relative to level 0.
+  double level_scale(int octave) const { return scales_.at(static_cast<std::size_t>(octave)); }
+
+ private:
+  OrbOptions options_;
+  std::vector<double> scales_;
+  cv::Ptr<cv::Feature2D> orb_;
+};
+
+/// Hamming distance between two 32-byte ORB descriptors.
+inline int hamming(const std::uint8_t* a, const std::uint8_t* b) {
+  int d = 0;
+  for (int i = 0; i < 32; i += 8) {
+    std::uint64_t x, y;
+    __builtin_memcpy(&x, a + i, 8);
+    __builtin_memcpy(&y, b + i, 8);
+    d += __builtin_popcountll(x ^ y);
+  }
+  return d;
+}
+
+}  // namespace geodrift::vo
