@@ -16,6 +16,12 @@
 #include <geodrift/lie/sim3.hpp>
 #include <geodrift/render/dataset.hpp>
 #include <geodrift/render/render.hpp>
+#if __has_include(<geodrift/vo/odometry.hpp>)
+#include <geodrift/eval/umeyama.hpp>
+#include <geodrift/vo/odometry.hpp>
+#include <unordered_map>
+#endif
+#include <algorithm>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -193,4 +199,89 @@ TEST_CASE("Rendered: retrieval puts a panorama within 10 m in the top 5 for >= 9
                      << " frames have a panorama within 10 m in the top 5");
   CHECK(hits >= 0.9 * queries);
 }
+#if __has_include(<geodrift/vo/odometry.hpp>)
+TEST_CASE("Rendered: panorama views localize against a VO map within 0.5 m and 1 deg",
+          "[geotag][rendered][vo][slow]") {
+  const std::string dir = dataset();
+  const geotag::Database& db = database();
+  const std::vector<lie::SE3d> gt = ground_truth(dir);
+  const geo::LocalFrame frame = geo::kitti_local_frame();
+  const map::Camera cam = kitti_camera();
+
+  // VO on the video; keep every keyframe's features as it becomes final.
+  vo::Odometry odo(cam);
+  std::vector<vo::KeyframeView> views;
+  odo.set_keyframe_callback([&](const vo::KeyframeBatch& b) { views.push_back(b.view); });
+  std::unique_ptr<vo::FrameSource> src = vo::open_image_folder(dir);
+  vo::Frame f;
+  while (src->next(&f)) odo.process(f);
+  odo.finish();
+  const map::Map m = odo.map();
+  REQUIRE(m.keyframes.size() >= 10);
+  std::unordered_map<int, Eigen::Vector3d> points;
+  for (const map::MapPoint& p : m.points) points[p.id] = p.position;
+  std::unordered_map<int, map::Keyframe> kfs;
+  std::vector<Eigen::Vector3d> src_c, dst_c;
+  for (const map::Keyframe& k : m.keyframes) {
+    kfs[k.id] = k;
+    src_c.push_back(k.center());
+    dst_c.push_back(gt.at(k.frame_index).inverse().translation());
+  }
+  // Align M to W (Sim3 over all keyframe centres).
+  const eval::Alignment al = eval::umeyama(src_c, dst_c, true);
+  REQUIRE(al.ok());
+  WARN("VO: " << m.keyframes.size() << " keyframes, " << m.points.size()
+              << " points, Sim3 alignment RMS " << al.rmse << " m");
+
+  geotag::PipelineOptions po;
+  geotag::GeoLocalizer loc(db, frame, po);
+  std::vector<double> pos_err, rot_err;
+  int tried = 0;
+  for (const vo::KeyframeView& v : views) {
+    if (!kfs.count(v.keyframe_id)) continue;  // culled later
+    geotag::KeyframeFeatures kf;
+    kf.keyframe = kfs[v.keyframe_id];
+    kf.gray = v.image;
+    kf.keypoints = v.keypoints;
+    kf.descriptors = v.descriptors;
+    kf.point_ids = v.point_ids;
+    if (kf.gray.empty()) continue;
+    ++tried;
+    std::vector<geotag::ViewAttempt> attempts;
+    const std::vector<map::Correspondence> cs = loc.process(
+        kf,
+        [&](int id) -> const Eigen::Vector3d* {
+          const auto it = points.find(id);
+          return it == points.end() ? nullptr : &it->second;
+        },
+        nullptr, &attempts);
+    for (const map::Correspondence& c : cs) {
+      int view = -1;
+      for (const geotag::ViewAttempt& a : attempts)
+        if (a.correspondence == c.id) view = a.view;
+      REQUIRE(view >= 0);
+      const lie::SE3d T_vm = c.T_vk * kf.keyframe.T_cw;
+      const Eigen::Vector3d c_w = al.apply(T_vm.inverse().translation());
+      const lie::SE3d T_true = geotag::view_pose_world(db.views()[view], frame);
+      pos_err.push_back((c_w - T_true.inverse().translation()).norm());
+      const Eigen::Matrix3d R_wv = al.R * T_vm.rotation().matrix().transpose();
+      rot_err.push_back(lie::SO3d(Eigen::Matrix3d(R_wv * T_true.rotation().matrix())).log().norm() *
+                        180.0 / kPi);
+    }
+  }
+  REQUIRE(!pos_err.empty());
+  std::vector<double> sp = pos_err, sr = rot_err;
+  std::sort(sp.begin(), sp.end());
+  std::sort(sr.begin(), sr.end());
+  int good = 0;
+  for (std::size_t i = 0; i < pos_err.size(); ++i)
+    good += (pos_err[i] < 0.5 && rot_err[i] < 1.0) ? 1 : 0;
+  WARN("localized " << pos_err.size() << " views from " << tried << " keyframes: median "
+                    << sp[sp.size() / 2] << " m / " << sr[sr.size() / 2] << " deg, max "
+                    << sp.back() << " m / " << sr.back() << " deg; " << good
+                    << " within 0.5 m and 1 deg");
+  CHECK(pos_err.size() >= 4);
+  CHECK(good >= 0.9 * pos_err.size());
+}
+#endif
 #endif
