@@ -13,5 +13,6 @@ int run_simulate(int argc, char** argv);    ///< geodrift simulate (cmd_simulate
 int run_experiment(int argc, char** argv);  ///< geodrift experiment (cmd_experiment.cpp)
 int run_geotags(int argc, char** argv);     ///< geodrift geotags build|query (cmd_geotags.cpp)
 int run_render(int argc, char** argv);      ///< geodrift render (cmd_render.cpp)
+int run_run(int argc, char** argv);         ///< geodrift run (cmd_run.cpp)
 
 }  // namespace geodrift::cli

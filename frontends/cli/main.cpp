@@ -22,6 +22,13 @@
 #define GEODRIFT_CLI_HAS_RENDER 0
 #endif
 
+// geodrift run exists when geodrift::vo is built (it needs OpenCV).
+#if __has_include(<geodrift/vo/odometry.hpp>)
+#define GEODRIFT_CLI_HAS_VO 1
+#else
+#define GEODRIFT_CLI_HAS_VO 0
+#endif
+
 namespace {
 
 struct Subcommand {
@@ -37,6 +44,9 @@ const Subcommand kSubcommands[] = {
     {"eval", geodrift::cli::run_eval, "compare a corrected trajectory with ground truth"},
     {"simulate", geodrift::cli::run_simulate,
      "simulate monocular SLAM output (drifted trajectory, map, anchors) on KITTI"},
+#if GEODRIFT_CLI_HAS_VO
+    {"run", geodrift::cli::run_run, "monocular VO on images or a video, then the Corrector"},
+#endif
 #if GEODRIFT_CLI_HAS_RENDER
     {"render", geodrift::cli::run_render,
      "render a street-world dataset (frames + panoramas) on a KITTI path"},
