@@ -267,6 +267,10 @@ TEST_CASE("Rendered: panorama views localize against a VO map within 0.5 m and 1
       const Eigen::Matrix3d R_wv = al.R * T_vm.rotation().matrix().transpose();
       rot_err.push_back(lie::SO3d(Eigen::Matrix3d(R_wv * T_true.rotation().matrix())).log().norm() *
                         180.0 / kPi);
+      if (pos_err.back() > 0.5 || rot_err.back() > 1.0)
+        WARN("keyframe " << kf.keyframe.frame_index << " view " << view << ": " << pos_err.back()
+                         << " m, " << rot_err.back() << " deg, " << c.inliers << " inliers, RMS "
+                         << c.reprojection_rms);
     }
   }
   REQUIRE(!pos_err.empty());

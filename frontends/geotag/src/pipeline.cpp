@@ -1,6 +1,7 @@
 #include "geodrift/geotag/pipeline.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <list>
 
 #include "geodrift/error.hpp"
@@ -124,6 +125,20 @@ std::vector<map::Correspondence> GeoLocalizer::process(
     }
     a.pairs_3d = static_cast<int>(X.size());
     a.result = localize_view(X, uv, db_.views()[r.view].camera, options_.localize);
+    if (a.result.ok && options_.max_view_tilt_deg > 0 && db_.views()[r.view].direction >= 0) {
+      // Angle between the view's and the keyframe's "down" axes, both expressed in M.
+      const Eigen::Vector3d down_v =
+          a.result.T_vm.rotation().inverse().act(Eigen::Vector3d::UnitY());
+      const Eigen::Vector3d down_k =
+          kf.keyframe.T_cw.rotation().inverse().act(Eigen::Vector3d::UnitY());
+      const double tilt =
+          std::acos(std::clamp(down_v.dot(down_k), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+      if (tilt > options_.max_view_tilt_deg) {
+        a.result.ok = false;
+        a.result.reason = "view tilted " + std::to_string(tilt) +
+                          " deg from the keyframe (panorama views are level)";
+      }
+    }
     if (a.result.ok) {
       a.correspondence = next_id_;
       out.push_back(make_correspondence(next_id_++, db_.views()[r.view], kf.keyframe, a.result,

@@ -53,6 +53,11 @@ struct PipelineOptions {
   double sigma_m = 2.0;  ///< Correspondence::sigma_m (geo-tag accuracy, metres)
   bool localize_each_view_once = true;
   double min_retrieval_score = 0.0;  ///< views scoring below this are skipped
+  /// Panorama views are level; a keyframe of a road vehicle is level up to the road's grade.
+  /// A localized panorama view whose image y axis (down) is tilted from the keyframe's by more
+  /// than this is rejected as a wrong localization (10 deg: an 18 % grade plus margin). Not
+  /// applied to photos (their pitch and roll are unknown); <= 0 disables it.
+  double max_view_tilt_deg = 10.0;
 };
 
 /// The outcome of one keyframe x view attempt.
