@@ -216,7 +216,7 @@ TEST_CASE("Pipeline: a keyframe retrieves, matches and localizes the panorama vi
           lie::SO3d(Eigen::Matrix3d(R_vw * T_true.rotation().matrix().transpose())).log().norm() *
           180.0 / kPi;
       CHECK(ang < 1.0);
-      CHECK(c.inliers >= 25);
+      CHECK(c.inliers >= po.localize.min_inliers);
       CHECK(c.reprojection_rms <= po.localize.max_rms_px);
       if ((c_w - pano_c[i]).norm() < 0.5) ++localized_right;
       max_err = std::max(max_err, (c_w - pano_c[i]).norm());
