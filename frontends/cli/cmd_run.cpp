@@ -17,6 +17,14 @@
 #include <geodrift/vo/input.hpp>
 #include <geodrift/vo/odometry.hpp>
 #include <map>
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+#include <fstream>
+#include <geodrift/geotag/pipeline.hpp>
+#include <geodrift/io/csv.hpp>
+#include <geodrift/lie/sim3.hpp>
+#include <memory>
+#include <unordered_map>
+#endif
 #include <sstream>
 #include <string>
 #include <vector>
@@ -42,8 +50,15 @@ inputs
                       "K: fx 0 cx 0 fy cy 0 0 1" [+ "D: k1 k2 p1 p2 [k3]"], or an OpenCV YAML
                       with camera_matrix/K and distortion_coefficients/D. Default with --images:
                       DIR/calib.txt. Frames are undistorted when the calibration has distortion.
-  --geotags DIR       geo-tagged panoramas/photos: not available yet (the geo-tag pipeline is
-                      a separate issue); the VO output below is written without it
+  --geotags DIR|FILE  geo-tagged panoramas/photos: a folder with geotags.csv (the database is
+                      built first; see `geodrift geotags build --help` for the CSV) or a
+                      database FILE written by `geodrift geotags build`. Each keyframe then
+                      retrieves its top-5 views (RootSIFT bag of words), matches ORB + K-VLD,
+                      localizes them by PnP + LM against its map points, and every localized
+                      view is a correspondence for the Corrector (INIT at the 4th, then
+                      PGO + BA). W = UTM grid at the first geo-tag's position.
+  --geotag-gate M     after INIT, only retrieve views within M metres of the keyframe's
+                      corrected position (default 50; 0 = never gate)
 
 options
   --fps F             frame rate for timestamps of an image folder without times.txt (default 10)
@@ -71,10 +86,10 @@ std::string json_num(double v) {
 }  // namespace
 
 int run_run(int argc, char** argv) {
-  const Args args(
-      argc, argv,
-      {"images", "video", "calib", "geotags", "fps", "max-frames", "features", "threads", "out"},
-      {"help", "force"});
+  const Args args(argc, argv,
+                  {"images", "video", "calib", "geotags", "geotag-gate", "fps", "max-frames",
+                   "features", "threads", "out"},
+                  {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
     return 0;
@@ -82,10 +97,14 @@ int run_run(int argc, char** argv) {
   if (args.has("images") == args.has("video"))
     throw UsageError("give exactly one of --images DIR and --video FILE");
   const std::string out_dir = args.required("out");
+#if !defined(GEODRIFT_CLI_HAS_GEOTAG)
   if (args.has("geotags"))
-    throw UsageError(
-        "--geotags is not available yet: the geo-tag pipeline (retrieval, matching, "
-        "localization) has not landed; run without --geotags for the VO reconstruction");
+    throw UsageError("--geotags needs geodrift built with the geotag frontend (OpenCV)");
+#endif
+  const double gate_m = args.has("geotag-gate")
+                            ? parse_number_list("geotag-gate", args.get("geotag-gate")).at(0)
+                            : 50.0;
+  if (gate_m < 0) throw UsageError("--geotag-gate must be >= 0");
   const double fps = args.has("fps") ? parse_number_list("fps", args.get("fps")).at(0) : 10.0;
   if (!(fps > 0)) throw UsageError("--fps must be > 0");
   const long long max_frames = args.get_int("max-frames", -1);
@@ -130,6 +149,52 @@ int run_run(int argc, char** argv) {
         std::to_string(frame.gray.cols) + "x" + std::to_string(frame.gray.rows));
   vo::Undistorter undistort(calib);
 
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+  // ---- geo-tagged views (paper Sec. 3.3) -----------------------------------------------------
+  std::unique_ptr<geotag::Database> geo_db;
+  std::unique_ptr<geotag::GeoLocalizer> geo_loc;
+  geo::LocalFrame geo_frame;
+  double geotag_build_s = 0;
+  if (args.has("geotags")) {
+    const std::string g = args.get("geotags");
+    std::error_code ec;
+    const auto tg = std::chrono::steady_clock::now();
+    if (std::filesystem::is_directory(g, ec)) {
+      const std::string csv = (std::filesystem::path(g) / "geotags.csv").string();
+      if (!std::filesystem::exists(csv, ec))
+        throw Error("--geotags '" + g + "' is a folder without geotags.csv");
+      geotag::Database::BuildOptions bo;
+      bo.video_camera = calib.camera;
+      if (stderr_is_tty())
+        bo.progress = [](const char* stage, std::size_t done, std::size_t total) {
+          std::fprintf(stderr, "\rgeodrift run: geo-tag database %-10s %zu/%zu   ", stage, done,
+                       total);
+        };
+      geo_db = std::make_unique<geotag::Database>(
+          geotag::Database::build(geotag::read_geotag_csv(csv), bo));
+      if (stderr_is_tty()) std::fputc('\n', stderr);
+    } else {
+      geo_db = std::make_unique<geotag::Database>(geotag::Database::load(g));
+      const map::Camera& c = geo_db->video_camera();
+      if (std::abs(c.fx - calib.camera.fx) > 1e-6 * c.fx || c.width != calib.camera.width ||
+          c.height != calib.camera.height)
+        throw Error("--geotags '" + g + "' was built for another camera (fx " +
+                    std::to_string(c.fx) + ", " + std::to_string(c.width) + "x" +
+                    std::to_string(c.height) + "); rebuild it with this calibration");
+    }
+    geotag_build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tg).count();
+    const map::GeoTag& t0 = geo_db->sources().front().tag;
+    geo_frame = geo::LocalFrame::from_geodetic(t0.latitude_deg, t0.longitude_deg, t0.height);
+    geotag::PipelineOptions po;
+    po.gate = gate_m > 0;
+    if (gate_m > 0) po.gate_radius_m = gate_m;
+    geo_loc = std::make_unique<geotag::GeoLocalizer>(*geo_db, geo_frame, po);
+  }
+  std::unordered_map<int, Eigen::Vector3d> geo_points;  // final map points, M
+  int geo_attempts = 0, geo_corrs = 0;
+  double geo_s = 0;
+#endif
+
   // ---- VO -> Corrector ----------------------------------------------------------------------
   vo::Odometry odo(calib.camera, vopt);
   correction::Corrector corrector;
@@ -140,8 +205,38 @@ int run_run(int argc, char** argv) {
     for (const auto& p : b.new_points) corrector.add_point(p);
     for (const auto& o : b.observations) corrector.add_observation(o);
     ++streamed;
-    // Hook for --geotags (issue 6): retrieve geo views for b.view, match its ORB keypoints,
-    // localize against b.view.point_ids' map points, corrector.add_correspondence(...).
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+    if (geo_loc) {
+      const auto tg = std::chrono::steady_clock::now();
+      for (const auto& p : b.new_points) geo_points[p.id] = p.position;
+      geotag::KeyframeFeatures kf;
+      kf.keyframe = b.keyframe;
+      kf.gray = b.view.image;
+      kf.keypoints = b.view.keypoints;
+      kf.descriptors = b.view.descriptors;
+      kf.point_ids = b.view.point_ids;
+      if (!kf.gray.empty() && kf.keypoints.size() == kf.point_ids.size()) {
+        Eigen::Vector3d estimate;
+        const Eigen::Vector3d* est = nullptr;
+        if (corrector.initialized()) {
+          estimate = corrector.keyframe_center_w(corrector.keyframe_index(b.keyframe.id));
+          est = &estimate;
+        }
+        std::vector<geotag::ViewAttempt> attempts;
+        const std::vector<map::Correspondence> cs = geo_loc->process(
+            kf,
+            [&](int id) -> const Eigen::Vector3d* {
+              const auto it = geo_points.find(id);
+              return it == geo_points.end() ? nullptr : &it->second;
+            },
+            est, &attempts);
+        geo_attempts += static_cast<int>(attempts.size());
+        for (const map::Correspondence& c : cs) corrector.add_correspondence(c);
+        geo_corrs += static_cast<int>(cs.size());
+      }
+      geo_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - tg).count();
+    }
+#endif
   });
   const bool tty = stderr_is_tty();
   std::map<int, double> stamps;
@@ -216,8 +311,70 @@ int run_run(int argc, char** argv) {
   StagedOutput out(out_dir, args.flag("force"));
   const std::string note =
       "M = geodrift VO map frame (first keyframe = origin, arbitrary scale); no geo-tags";
-  io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note);
-  io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note);
+  bool geo_written = false;
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+  if (geo_loc) {
+    corrector.finish();
+    if (!corrector.initialized())
+      throw Error(std::to_string(geo_corrs) + " geo views localized in " +
+                  std::to_string(geo_attempts) + " attempts; INIT needs 4 (" +
+                  corrector.init_message() + ")");
+    // Every tracked frame in W: its raw pose relative to its keyframe composed with the
+    // keyframe's corrected Sim(3) pose.
+    std::map<int, int> ci_of_frame;
+    for (int i = 0; i < corrector.num_keyframes(); ++i)
+      ci_of_frame[corrector.keyframes()[i].frame_index] = i;
+    int last_anchor_frame = -1;
+    for (const map::Correspondence& c : corrector.correspondences())
+      last_anchor_frame =
+          std::max(last_anchor_frame,
+                   corrector.keyframes()[corrector.keyframe_index(c.keyframe)].frame_index);
+    std::vector<io::TrajectoryCsvRow> rows;
+    io::Trajectory w_traj;
+    w_traj.has_timestamps = true;
+    std::vector<Eigen::Vector3d> track;
+    for (const auto& [fi, T_raw] : raw) {
+      auto it = ci_of_frame.upper_bound(fi);
+      if (it == ci_of_frame.begin() || !raw.count(std::prev(it)->first)) continue;
+      --it;
+      const lie::SE3d dT = T_raw * raw.at(it->first).inverse();
+      const lie::SE3d T = (lie::Sim3d(dT) * corrector.keyframe_sim3(it->second)).to_se3();
+      io::TrajectoryCsvRow r;
+      r.frame = fi;
+      r.timestamp = stamps.count(fi) ? stamps.at(fi) : NAN;
+      r.keyframe = it->first == fi;
+      r.T_cw = T;
+      r.after_last_anchor = fi > last_anchor_frame;
+      rows.push_back(r);
+      io::TrajectoryPose p;
+      p.frame = fi;
+      p.timestamp = r.timestamp;
+      p.T_cw = T;
+      w_traj.poses.push_back(p);
+      track.push_back(T.inverse().translation());
+    }
+    const std::string wnote = geo_frame.description();
+    io::write_trajectory_csv(out.path("trajectory.csv"), rows, geo_frame,
+                             "geodrift run with geo-tagged views");
+    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), w_traj, wnote);
+    io::write_trajectory_tum(out.path("trajectory_tum.txt"), w_traj, wnote);
+    std::ofstream cs(out.path("correspondences.csv"));
+    cs << "# geodrift " << kVersion << " localized geo views; y in " << wnote << "\n"
+       << "id,keyframe,frame,geotag,x,y,z,inliers,reprojection_rms_px\n";
+    for (const map::Correspondence& c : corrector.correspondences())
+      cs << c.id << "," << c.keyframe << ","
+         << corrector.keyframes()[corrector.keyframe_index(c.keyframe)].frame_index << ","
+         << c.geotag_id << "," << io::detail::fmt(c.y_w.x()) << "," << io::detail::fmt(c.y_w.y())
+         << "," << io::detail::fmt(c.y_w.z()) << "," << c.inliers << ","
+         << io::detail::fmt(c.reprojection_rms) << "\n";
+    if (!cs) throw Error("cannot write " + out.path("correspondences.csv"));
+    geo_written = true;
+  }
+#endif
+  if (!geo_written) {
+    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note);
+    io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note);
+  }
   io::write_trajectory_kitti(out.path("keyframes_kitti.txt"), kf_traj, note);
   std::filesystem::create_directory(out.path("model"));
   io::write_colmap_text(out.path("model"), m, note);
@@ -251,8 +408,19 @@ int run_run(int argc, char** argv) {
       << ",\n  \"lost_frame_ranges\": [";
     for (std::size_t i = 0; i < lost.size(); ++i)
       j << (i ? ", " : "") << "[" << lost[i].first << ", " << lost[i].second << "]";
-    j << "],\n  \"geotags\": null"
-      << ",\n  \"timings_s\": {\"total\": " << json_num(vo_s)
+    j << "],\n  \"geotags\": ";
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+    if (geo_loc)
+      j << "{\"source\": " << io::detail::json_string(args.get("geotags"))
+        << ", \"views\": " << geo_db->views().size() << ", \"attempts\": " << geo_attempts
+        << ", \"correspondences\": " << geo_corrs
+        << ", \"database_seconds\": " << json_num(geotag_build_s)
+        << ", \"localization_seconds\": " << json_num(geo_s)
+        << ", \"frame\": " << io::detail::json_string(geo_frame.description()) << "}";
+    else
+#endif
+      j << "null";
+    j << ",\n  \"timings_s\": {\"total\": " << json_num(vo_s)
       << ", \"frames_per_second\": " << json_num(frames / std::max(vo_s, 1e-9))
       << ", \"features\": " << json_num(t.features) << ", \"init\": " << json_num(t.init)
       << ", \"tracking\": " << json_num(t.tracking) << ", \"keyframe\": " << json_num(t.keyframe)

@@ -11,6 +11,7 @@ int run_correct(int argc, char** argv);     ///< geodrift correct (cmd_correct.c
 int run_eval(int argc, char** argv);        ///< geodrift eval (cmd_eval.cpp)
 int run_simulate(int argc, char** argv);    ///< geodrift simulate (cmd_simulate.cpp)
 int run_experiment(int argc, char** argv);  ///< geodrift experiment (cmd_experiment.cpp)
+int run_geotags(int argc, char** argv);     ///< geodrift geotags build|query (cmd_geotags.cpp)
 int run_render(int argc, char** argv);      ///< geodrift render (cmd_render.cpp)
 int run_run(int argc, char** argv);         ///< geodrift run (cmd_run.cpp)
 

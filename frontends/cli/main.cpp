@@ -54,6 +54,9 @@ const Subcommand kSubcommands[] = {
 #if GEODRIFT_CLI_HAS_EXPERIMENT
     {"experiment", geodrift::cli::run_experiment, "regenerate the paper's KITTI experiment"},
 #endif
+#if defined(GEODRIFT_CLI_HAS_GEOTAG)
+    {"geotags", geodrift::cli::run_geotags, "build or query a geo-tagged image database"},
+#endif
 };
 
 void print_usage(std::FILE* f) {

@@ -202,7 +202,7 @@ TEST_CASE("geodrift run fails cleanly on bad input and leaves no output", "[vo][
            out,
        "cannot open video"},
       {"--images " + t.file("rotation") + " --geotags " + t.file("x") + " --out " + out,
-       "not available yet"},
+       "cannot open geotag database"},
   };
   for (const Case& c : cases) {
     const Run r = run("run " + c.args);

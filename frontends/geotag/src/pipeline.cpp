@@ -1,0 +1,153 @@
+#include "geodrift/geotag/pipeline.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <list>
+
+#include "geodrift/error.hpp"
+#include "geodrift/geotag/features.hpp"
+
+#if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
+#include "geodrift/kvld/kvld.hpp"
+#endif
+
+namespace geodrift::geotag {
+
+struct GeoLocalizer::Cache {
+#if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
+  // K-VLD scale spaces: the current keyframe's and the last few views' (adjacent keyframes
+  // retrieve the same views).
+  int keyframe_id = -1;
+  std::unique_ptr<kvld::ImageScale> keyframe_scale;
+  std::list<std::pair<int, std::shared_ptr<kvld::ImageScale>>> views;
+  std::shared_ptr<kvld::ImageScale> view_scale(const Database& db, int v) {
+    for (auto it = views.begin(); it != views.end(); ++it)
+      if (it->first == v) {
+        views.splice(views.begin(), views, it);
+        return views.front().second;
+      }
+    views.push_front({v, std::make_shared<kvld::ImageScale>(db.view_image(v))});
+    if (views.size() > 16) views.pop_back();
+    return views.front().second;
+  }
+#endif
+};
+
+GeoLocalizer::GeoLocalizer(const Database& db, const geo::LocalFrame& frame,
+                           const PipelineOptions& options)
+    : db_(db), frame_(frame), options_(options), cache_(std::make_unique<Cache>()) {
+  GEODRIFT_CHECK(!db.views().empty(), "GeoLocalizer: the geotag database has no views");
+  GEODRIFT_CHECK(options.ratio > 0 && options.ratio <= 1,
+                 "GeoLocalizer: ratio " << options.ratio << " outside (0, 1]");
+  GEODRIFT_CHECK(options.max_putative >= 0, "GeoLocalizer: max_putative must be >= 0");
+  GEODRIFT_CHECK(options.top_k >= 1, "GeoLocalizer: top_k " << options.top_k << " must be >= 1");
+  GEODRIFT_CHECK(options.gate_radius_m > 0,
+                 "GeoLocalizer: gate radius " << options.gate_radius_m << " m must be > 0");
+}
+
+GeoLocalizer::~GeoLocalizer() = default;
+
+bool GeoLocalizer::have_kvld() const {
+#if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
+  return true;
+#else
+  return false;
+#endif
+}
+
+std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf, int view,
+                                                     ViewAttempt* a) {
+  const Features& vf = db_.orb(view);
+  std::vector<cv::DMatch> m = match_ratio_mutual(kf.descriptors, vf.descriptors, options_.ratio);
+  if (options_.max_putative > 0 && static_cast<int>(m.size()) > options_.max_putative)
+    m.resize(options_.max_putative);  // sorted by distance: the best are kept
+  a->putative = static_cast<int>(m.size());
+  std::vector<std::pair<int, int>> out;
+#if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
+  if (options_.use_kvld && !m.empty()) {
+    if (cache_->keyframe_id != kf.keyframe.id || !cache_->keyframe_scale) {
+      cache_->keyframe_scale = std::make_unique<kvld::ImageScale>(kf.gray);
+      cache_->keyframe_id = kf.keyframe.id;
+    }
+    const std::shared_ptr<kvld::ImageScale> vs = cache_->view_scale(db_, view);
+    std::vector<kvld::Match> put;
+    put.reserve(m.size());
+    for (const cv::DMatch& d : m) put.push_back({d.queryIdx, d.trainIdx});
+    const kvld::Result r =
+        kvld::filter(*cache_->keyframe_scale, *vs, kvld::keypoints_from_cv(kf.keypoints),
+                     kvld::keypoints_from_cv(vf.keypoints), put);
+    for (const kvld::Match& k : r.matches) out.push_back({k.i1, k.i2});
+    a->kept = static_cast<int>(out.size());
+    return out;
+  }
+#endif
+  for (const cv::DMatch& d : m) out.push_back({d.queryIdx, d.trainIdx});
+  a->kept = static_cast<int>(out.size());
+  return out;
+}
+
+std::vector<map::Correspondence> GeoLocalizer::process(
+    const KeyframeFeatures& kf,
+    const std::function<const Eigen::Vector3d*(int point_id)>& point_position,
+    const Eigen::Vector3d* position_w, std::vector<ViewAttempt>* attempts) {
+  GEODRIFT_CHECK(!kf.gray.empty() && kf.gray.type() == CV_8UC1,
+                 "keyframe " << kf.keyframe.id << ": an 8-bit grayscale image is needed");
+  GEODRIFT_CHECK(kf.keypoints.size() == kf.point_ids.size() &&
+                     static_cast<int>(kf.keypoints.size()) == kf.descriptors.rows,
+                 "keyframe " << kf.keyframe.id << ": " << kf.keypoints.size() << " keypoints, "
+                             << kf.descriptors.rows << " descriptors, " << kf.point_ids.size()
+                             << " point ids");
+  QueryOptions q;
+  q.top_k = options_.top_k;
+  q.frame = &frame_;
+  q.gate_radius_m = options_.gate_radius_m;
+  if (options_.gate && position_w) q.gate_position_w = *position_w;
+  const std::vector<Retrieved> top = db_.query(kf.gray, q);
+  std::vector<map::Correspondence> out;
+  for (const Retrieved& r : top) {
+    if (r.score < options_.min_retrieval_score) continue;
+    if (options_.localize_each_view_once && localized_.count(r.view)) continue;
+    ViewAttempt a;
+    a.keyframe = kf.keyframe.id;
+    a.view = r.view;
+    a.score = r.score;
+    const std::vector<std::pair<int, int>> m = match(kf, r.view, &a);
+    std::vector<Eigen::Vector3d> X;
+    std::vector<Eigen::Vector2d> uv;
+    const Features& vf = db_.orb(r.view);
+    for (const auto& [ik, iv] : m) {
+      const int pid = kf.point_ids[ik];
+      if (pid < 0) continue;
+      const Eigen::Vector3d* p = point_position(pid);
+      if (!p) continue;
+      X.push_back(*p);
+      uv.push_back({vf.keypoints[iv].pt.x, vf.keypoints[iv].pt.y});
+    }
+    a.pairs_3d = static_cast<int>(X.size());
+    a.result = localize_view(X, uv, db_.views()[r.view].camera, options_.localize);
+    if (a.result.ok && options_.max_view_tilt_deg > 0 && db_.views()[r.view].direction >= 0) {
+      // Angle between the view's and the keyframe's "down" axes, both expressed in M.
+      const Eigen::Vector3d down_v =
+          a.result.T_vm.rotation().inverse().act(Eigen::Vector3d::UnitY());
+      const Eigen::Vector3d down_k =
+          kf.keyframe.T_cw.rotation().inverse().act(Eigen::Vector3d::UnitY());
+      const double tilt =
+          std::acos(std::clamp(down_v.dot(down_k), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+      if (tilt > options_.max_view_tilt_deg) {
+        a.result.ok = false;
+        a.result.reason = "view tilted " + std::to_string(tilt) +
+                          " deg from the keyframe (panorama views are level)";
+      }
+    }
+    if (a.result.ok) {
+      a.correspondence = next_id_;
+      out.push_back(make_correspondence(next_id_++, db_.views()[r.view], kf.keyframe, a.result,
+                                        frame_, options_.sigma_m));
+      localized_.insert(r.view);
+    }
+    if (attempts) attempts->push_back(std::move(a));
+  }
+  return out;
+}
+
+}  // namespace geodrift::geotag

@@ -1,0 +1,273 @@
+#include "geodrift/geotag/views.hpp"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "geodrift/error.hpp"
+#include "geodrift/geotag/panorama.hpp"
+
+namespace geodrift::geotag {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return s.substr(b, e - b + 1);
+}
+
+std::vector<std::string> split_csv(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string tok;
+  while (std::getline(ss, tok, ',')) out.push_back(trim(tok));
+  if (!line.empty() && line.back() == ',') out.push_back("");
+  return out;
+}
+
+[[noreturn]] void fail(const std::string& path, int line, const std::string& what) {
+  std::ostringstream os;
+  os << path << ":" << line << ": " << what;
+  throw InvalidArgument(os.str());
+}
+
+double parse_number(const std::string& text, const std::string& path, int line,
+                    const std::string& field) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size())
+    fail(path, line, field + " '" + text + "' is not a number");
+  if (!std::isfinite(v)) fail(path, line, field + " '" + text + "' is not finite");
+  return v;
+}
+
+std::uint32_t be32(const unsigned char* p) {
+  return (std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) | (std::uint32_t(p[2]) << 8) |
+         std::uint32_t(p[3]);
+}
+
+/// Image size from the PNG or JPEG header without decoding; falls back to decoding.
+bool image_size(const std::string& path, int* w, int* h) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  unsigned char hdr[24] = {};
+  in.read(reinterpret_cast<char*>(hdr), sizeof hdr);
+  if (in.gcount() == 24 && hdr[0] == 0x89 && hdr[1] == 'P' && hdr[2] == 'N' && hdr[3] == 'G') {
+    *w = static_cast<int>(be32(hdr + 16));
+    *h = static_cast<int>(be32(hdr + 20));
+    return *w > 0 && *h > 0;
+  }
+  if (in.gcount() >= 2 && hdr[0] == 0xFF && hdr[1] == 0xD8) {
+    in.clear();
+    in.seekg(2);
+    for (int guard = 0; guard < 10000 && in; ++guard) {
+      unsigned char m[4];
+      in.read(reinterpret_cast<char*>(m), 4);
+      if (in.gcount() != 4 || m[0] != 0xFF) break;
+      const int len = (m[2] << 8) | m[3];
+      const unsigned char marker = m[1];
+      const bool sof =
+          marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+      if (sof) {
+        unsigned char s[5];
+        in.read(reinterpret_cast<char*>(s), 5);
+        if (in.gcount() != 5) break;
+        *h = (s[1] << 8) | s[2];
+        *w = (s[3] << 8) | s[4];
+        return *w > 0 && *h > 0;
+      }
+      in.seekg(len - 2, std::ios::cur);
+    }
+  }
+  const cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (img.empty()) return false;
+  *w = img.cols;
+  *h = img.rows;
+  return true;
+}
+
+}  // namespace
+
+std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
+                                       const GeoSourceOptions& options) {
+  namespace fs = std::filesystem;
+  std::ifstream in(csv_path);
+  if (!in) throw Error("cannot open geo-tag CSV '" + csv_path + "' for reading");
+  const fs::path folder = fs::absolute(fs::path(csv_path)).parent_path();
+  std::string line;
+  int lineno = 0;
+  std::vector<std::string> header;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    header = split_csv(t);
+    break;
+  }
+  if (header.empty()) throw Error("geo-tag CSV '" + csv_path + "' is empty (no header row)");
+  std::map<std::string, int> col;
+  for (std::size_t i = 0; i < header.size(); ++i) col[header[i]] = static_cast<int>(i);
+  const auto find = [&](std::initializer_list<const char*> names, bool required) {
+    for (const char* n : names)
+      if (col.count(n)) return col[n];
+    if (required) {
+      std::string list;
+      for (const char* n : names) list += (list.empty() ? "" : " or ") + std::string(n);
+      fail(csv_path, lineno, "header has no column " + list);
+    }
+    return -1;
+  };
+  const int c_file = find({"file", "image"}, true);
+  const int c_lat = find({"latitude", "latitude_deg"}, true);
+  const int c_lon = find({"longitude", "longitude_deg"}, true);
+  const int c_h = find({"height", "altitude_m"}, true);
+  const int c_head = find({"heading_deg", "true_heading_deg"}, true);
+  const int c_id = find({"id"}, false), c_kind = find({"kind"}, false);
+  const int c_frame = find({"frame"}, false);
+  const int c_fx = find({"fx"}, false), c_fy = find({"fy"}, false), c_cx = find({"cx"}, false),
+            c_cy = find({"cy"}, false);
+  const int n_intr = (c_fx >= 0) + (c_fy >= 0) + (c_cx >= 0) + (c_cy >= 0);
+  if (n_intr != 0 && n_intr != 4)
+    fail(csv_path, lineno, "photo intrinsics need all four columns fx, fy, cx, cy");
+
+  std::vector<GeoSource> out;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    const std::vector<std::string> f = split_csv(t);
+    if (f.size() < header.size())
+      fail(csv_path, lineno,
+           std::to_string(f.size()) + " fields, header has " + std::to_string(header.size()));
+    GeoSource s;
+    s.tag.id = c_id >= 0 ? static_cast<int>(parse_number(f[c_id], csv_path, lineno, "id"))
+                         : static_cast<int>(out.size());
+    s.tag.latitude_deg = parse_number(f[c_lat], csv_path, lineno, "latitude");
+    s.tag.longitude_deg = parse_number(f[c_lon], csv_path, lineno, "longitude");
+    s.tag.height = parse_number(f[c_h], csv_path, lineno, "height");
+    const double heading_deg = parse_number(f[c_head], csv_path, lineno, "heading_deg");
+    if (std::abs(s.tag.latitude_deg) > 90)
+      fail(csv_path, lineno, "latitude " + f[c_lat] + " outside [-90, 90]");
+    if (std::abs(s.tag.longitude_deg) > 180)
+      fail(csv_path, lineno, "longitude " + f[c_lon] + " outside [-180, 180]");
+    s.tag.heading = std::fmod(std::fmod(heading_deg, 360.0) + 360.0, 360.0) * kDeg;
+    if (c_frame >= 0 && !f[c_frame].empty())
+      s.frame = static_cast<int>(parse_number(f[c_frame], csv_path, lineno, "frame"));
+    if (f[c_file].empty()) fail(csv_path, lineno, "empty file name");
+    fs::path p(f[c_file]);
+    if (p.is_relative()) {
+      fs::path a = folder / p;
+      for (const char* sub : {"panoramas", "images"})
+        if (!fs::exists(a) && fs::exists(folder / sub / p)) a = folder / sub / p;
+      p = a;
+    }
+    s.path = p.lexically_normal().string();
+    int w = 0, h = 0;
+    if (!fs::is_regular_file(p)) fail(csv_path, lineno, "image '" + s.path + "' does not exist");
+    if (!image_size(s.path, &w, &h))
+      fail(csv_path, lineno, "image '" + s.path + "' cannot be read");
+    if (c_kind >= 0 && !f[c_kind].empty()) {
+      if (f[c_kind] == "panorama")
+        s.kind = SourceKind::kPanorama;
+      else if (f[c_kind] == "photo")
+        s.kind = SourceKind::kPhoto;
+      else
+        fail(csv_path, lineno, "kind '" + f[c_kind] + "' is neither panorama nor photo");
+    } else {
+      s.kind = (w == 2 * h) ? SourceKind::kPanorama : SourceKind::kPhoto;
+    }
+    if (s.kind == SourceKind::kPanorama && w != 2 * h)
+      fail(csv_path, lineno,
+           "panorama '" + s.path + "' is " + std::to_string(w) + "x" + std::to_string(h) +
+               ", not 2:1 equirectangular");
+    if (s.kind == SourceKind::kPhoto) {
+      map::Camera& c = s.photo_camera;
+      c.id = -1;
+      c.width = w;
+      c.height = h;
+      if (n_intr == 4) {
+        c.fx = parse_number(f[c_fx], csv_path, lineno, "fx");
+        c.fy = parse_number(f[c_fy], csv_path, lineno, "fy");
+        c.cx = parse_number(f[c_cx], csv_path, lineno, "cx");
+        c.cy = parse_number(f[c_cy], csv_path, lineno, "cy");
+      } else if (std::isfinite(options.photo_hfov_deg)) {
+        if (!(options.photo_hfov_deg > 1 && options.photo_hfov_deg < 179))
+          throw InvalidArgument("photo horizontal field of view " +
+                                std::to_string(options.photo_hfov_deg) + " deg outside (1, 179)");
+        c.fx = c.fy = 0.5 * w / std::tan(0.5 * options.photo_hfov_deg * kDeg);
+        c.cx = 0.5 * w - 0.5;
+        c.cy = 0.5 * h - 0.5;
+      } else {
+        fail(csv_path, lineno,
+             "photo '" + s.path +
+                 "' has no intrinsics (give columns fx, fy, cx, cy or a field of view)");
+      }
+      try {
+        c.validate();
+      } catch (const InvalidArgument& e) {
+        fail(csv_path, lineno, e.what());
+      }
+    }
+    out.push_back(std::move(s));
+  }
+  if (out.empty()) throw Error("geo-tag CSV '" + csv_path + "' has a header but no rows");
+  return out;
+}
+
+std::vector<GeoView> make_views(const std::vector<GeoSource>& sources, const map::Camera& video) {
+  std::vector<GeoView> views;
+  const bool any_pano = [&] {
+    for (const GeoSource& s : sources)
+      if (s.kind == SourceKind::kPanorama) return true;
+    return false;
+  }();
+  if (any_pano) video.validate();
+  for (std::size_t i = 0; i < sources.size(); ++i) {
+    const GeoSource& s = sources[i];
+    if (s.kind == SourceKind::kPanorama) {
+      for (int k = 0; k < kViewsPerPanorama; ++k) {
+        GeoView v;
+        v.id = static_cast<int>(views.size());
+        v.source = static_cast<int>(i);
+        v.tag = s.tag;
+        v.heading = std::fmod(s.tag.heading + k * kViewStepDeg * kDeg, 2.0 * kPi);
+        v.direction = k;
+        v.camera = video;
+        v.frame = s.frame;
+        views.push_back(v);
+      }
+    } else {
+      GeoView v;
+      v.id = static_cast<int>(views.size());
+      v.source = static_cast<int>(i);
+      v.tag = s.tag;
+      v.heading = s.tag.heading;
+      v.direction = -1;
+      v.camera = s.photo_camera;
+      v.frame = s.frame;
+      views.push_back(v);
+    }
+  }
+  return views;
+}
+
+Eigen::Vector3d view_position_world(const GeoView& view, const geo::LocalFrame& frame) {
+  return frame.to_world(view.tag.latitude_deg, view.tag.longitude_deg, view.tag.height);
+}
+
+lie::SE3d view_pose_world(const GeoView& view, const geo::LocalFrame& frame) {
+  const Eigen::Vector3d c = view_position_world(view, frame);
+  const Eigen::Matrix3d R_wc = frame.level_camera_rotation_from_heading(view.heading, c);
+  const Eigen::Matrix3d R_cw = R_wc.transpose();
+  return lie::SE3d(lie::SO3d(R_cw), -R_cw * c);
+}
+
+}  // namespace geodrift::geotag

@@ -1,0 +1,190 @@
+// The retrieval database on real geo-tagged photos (Lund street, OpenSfM/Mapillary) and its
+// file format.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <geodrift/geotag/database.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "support/test_files.hpp"
+
+using namespace geodrift;
+
+namespace {
+const std::string kLund = std::string(GEODRIFT_DATA_DIR) + "/opensfm_lund/lund_exif_gps.csv";
+
+bool have_lund() {
+  if (std::filesystem::exists(kLund)) return true;
+  WARN("Lund data not found at " << kLund);
+  return false;
+}
+
+geotag::Database::BuildOptions small_options() {
+  geotag::Database::BuildOptions o;
+  o.sift_features = 800;
+  o.orb_features = 500;
+  o.vocabulary.branching = 12;
+  o.vocabulary.depth = 3;
+  return o;
+}
+}  // namespace
+
+TEST_CASE("Database on the Lund photos: build, retrieve, gate, save and load",
+          "[geotag][database][data]") {
+  if (!have_lund()) return;
+  geotag::GeoSourceOptions so;
+  so.photo_hfov_deg = 60.0;
+  const std::vector<geotag::GeoSource> sources = geotag::read_geotag_csv(kLund, so);
+  REQUIRE(sources.size() == 29);
+  CHECK(sources[0].kind == geotag::SourceKind::kPhoto);
+  CHECK(sources[0].photo_camera.width == 1024);
+  CHECK(sources[0].tag.latitude_deg == Approx(55.698167));
+  CHECK(sources[0].tag.heading == Approx(179.2156 * M_PI / 180.0));
+
+  std::size_t last_done = 0;
+  int calls = 0;
+  geotag::Database::BuildOptions o = small_options();
+  o.progress = [&](const char*, std::size_t done, std::size_t) {
+    last_done = done;
+    ++calls;
+  };
+  const geotag::Database db = geotag::Database::build(sources, o);
+  REQUIRE(db.views().size() == 29);
+  CHECK(calls > 29);
+  CHECK(last_done == 29);  // the index stage ends at its last view
+  CHECK(db.vocabulary().num_words() > 1000);
+  CHECK(db.vocabulary().num_words() <= 1728);
+
+  // Each photo, altered (75 % size, darker, blurred), retrieves itself or a neighbour first.
+  int self_top1 = 0, self_top3 = 0;
+  double max_top1_dist = 0;
+  for (int i = 0; i < 29; ++i) {
+    cv::Mat g = cv::imread(sources[i].path, cv::IMREAD_GRAYSCALE);
+    REQUIRE(!g.empty());
+    cv::resize(g, g, cv::Size(), 0.75, 0.75, cv::INTER_AREA);
+    g.convertTo(g, CV_8U, 0.8, 10.0);
+    cv::GaussianBlur(g, g, cv::Size(3, 3), 0.8);
+    geotag::QueryOptions q;
+    q.top_k = 3;
+    const std::vector<geotag::Retrieved> r = db.query(g, q);
+    REQUIRE(!r.empty());
+    self_top1 += r[0].view == i ? 1 : 0;
+    for (const geotag::Retrieved& x : r) self_top3 += x.view == i ? 1 : 0;
+    const geo::LocalFrame f0 = geo::LocalFrame::from_geodetic(
+        sources[i].tag.latitude_deg, sources[i].tag.longitude_deg, sources[i].tag.height);
+    const Eigen::Vector3d d = geotag::view_position_world(db.views()[r[0].view], f0);
+    max_top1_dist = std::max(max_top1_dist, std::hypot(d.x(), d.y()));
+    CHECK(r[0].score <= 1.0f + 1e-5f);
+  }
+  INFO(self_top1 << " of 29 first, " << self_top3 << " in the top 3; worst first hit at "
+                 << max_top1_dist << " m");
+  // The photos are 6 m apart along one street; neighbours share most of the scene, so a
+  // neighbour may outrank the photo itself, but never anything farther than ~2 photos away.
+  CHECK(self_top1 >= 27);
+  CHECK(self_top3 >= 28);
+  CHECK(max_top1_dist < 15.0);
+
+  // Distance gate: around photo 0, only views within the radius come back.
+  const geo::LocalFrame frame = geo::LocalFrame::from_geodetic(
+      sources[0].tag.latitude_deg, sources[0].tag.longitude_deg, sources[0].tag.height);
+  geotag::QueryOptions gate;
+  gate.top_k = 29;
+  gate.frame = &frame;
+  gate.gate_position_w = Eigen::Vector3d::Zero();
+  gate.gate_radius_m = 40.0;
+  const cv::Mat q0 = db.view_image(5);
+  const std::vector<geotag::Retrieved> all = db.query(q0, [] {
+    geotag::QueryOptions a;
+    a.top_k = 29;
+    return a;
+  }());
+  const std::vector<geotag::Retrieved> near = db.query(q0, gate);
+  CHECK(!near.empty());
+  CHECK(near.size() < all.size());
+  for (const geotag::Retrieved& r : near) {
+    const Eigen::Vector3d p = geotag::view_position_world(db.views()[r.view], frame);
+    CHECK(std::hypot(p.x(), p.y()) <= 40.0);
+  }
+
+  // Save, load: same views, same answers.
+  test::TempDir tmp;
+  const std::string path = tmp.file("lund.gdb");
+  db.save(path);
+  CHECK(tmp.num_entries() == 1);  // no temporary left behind
+  const geotag::Database back = geotag::Database::load(path);
+  REQUIRE(back.views().size() == db.views().size());
+  CHECK(back.vocabulary().num_words() == db.vocabulary().num_words());
+  for (std::size_t v = 0; v < db.views().size(); ++v) {
+    CHECK(back.views()[v].heading == db.views()[v].heading);
+    CHECK(back.views()[v].tag.latitude_deg == db.views()[v].tag.latitude_deg);
+    CHECK(back.orb(static_cast<int>(v)).keypoints.size() ==
+          db.orb(static_cast<int>(v)).keypoints.size());
+    CHECK(cv::norm(back.orb(static_cast<int>(v)).descriptors,
+                   db.orb(static_cast<int>(v)).descriptors, cv::NORM_HAMMING) == 0);
+  }
+  const std::vector<geotag::Retrieved> again = back.query(q0, gate);
+  REQUIRE(again.size() == near.size());
+  for (std::size_t i = 0; i < near.size(); ++i) {
+    CHECK(again[i].view == near[i].view);
+    CHECK(again[i].score == near[i].score);
+  }
+
+  // A truncated copy and a foreign file are refused with the path in the message.
+  const std::string bytes = test::read_text(path);
+  test::write_text(tmp.file("cut.gdb"), bytes.substr(0, bytes.size() / 2));
+  test::require_io_error([&] { geotag::Database::load(tmp.file("cut.gdb")); }, tmp.file("cut.gdb"));
+  test::write_text(tmp.file("other.gdb"), "hello, world, this is not a database at all");
+  test::require_io_error([&] { geotag::Database::load(tmp.file("other.gdb")); },
+                         tmp.file("other.gdb"));
+  test::require_io_error([&] { geotag::Database::load(tmp.file("missing.gdb")); },
+                         tmp.file("missing.gdb"));
+}
+
+TEST_CASE("Geo-tag CSVs with bad rows are refused naming the line", "[geotag][database][errors]") {
+  test::TempDir tmp;
+  // A tiny 2:1 image (a panorama) and a 4:3 one (a photo).
+  cv::imwrite(tmp.file("p.png"), cv::Mat(32, 64, CV_8U, cv::Scalar(9)));
+  cv::imwrite(tmp.file("q.png"), cv::Mat(30, 40, CV_8U, cv::Scalar(9)));
+  const std::string h = "id,file,latitude,longitude,height,heading_deg\n";
+  const auto csv = [&](const std::string& name, const std::string& body) {
+    test::write_text(tmp.file(name), body);
+    return tmp.file(name);
+  };
+  {
+    const auto s = geotag::read_geotag_csv(csv("ok.csv", h + "3,p.png,49.0,8.4,160,90\n"));
+    REQUIRE(s.size() == 1);
+    CHECK(s[0].kind == geotag::SourceKind::kPanorama);
+    CHECK(s[0].tag.id == 3);
+  }
+  std::string p = csv("nan.csv", h + "0,p.png,nan,8.4,160,90\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "latitude");
+  p = csv("range.csv", h + "0,p.png,95,8.4,160,90\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "outside");
+  p = csv("short.csv", h + "0,p.png,49,8.4\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "fields");
+  p = csv("missing.csv", h + "0,none.png,49,8.4,160,90\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "does not exist");
+  p = csv("nocol.csv", "id,file,latitude,longitude,height\n0,p.png,49,8.4,160\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 1, "heading_deg");
+  p = csv("photo.csv", h + "0,q.png,49,8.4,160,90\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "intrinsics");
+  p = csv("kind.csv", "file,latitude,longitude,height,heading_deg,kind\nq.png,49,8,1,0,panorama\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "not 2:1");
+  test::write_text(tmp.file("garbage.png"), "not an image");
+  p = csv("garbage.csv", h + "0,garbage.png,49,8.4,160,90\n");
+  test::require_parse_error([&] { geotag::read_geotag_csv(p); }, p, 2, "cannot be read");
+  p = csv("empty.csv", h);
+  test::require_io_error([&] { geotag::read_geotag_csv(p); }, p);
+  test::require_io_error([&] { geotag::read_geotag_csv(tmp.file("nope.csv")); },
+                         tmp.file("nope.csv"));
+  CHECK_THROWS_AS(geotag::Database::build({}, geotag::Database::BuildOptions{}), InvalidArgument);
+  // Black images: no features, so no vocabulary; a clear error, no crash.
+  cv::imwrite(tmp.file("black.png"), cv::Mat(300, 400, CV_8U, cv::Scalar(0)));
+  geotag::GeoSourceOptions so;
+  so.photo_hfov_deg = 60;
+  const auto black =
+      geotag::read_geotag_csv(csv("black.csv", h + "0,black.png,49,8.4,160,90\n"), so);
+  CHECK_THROWS_AS(geotag::Database::build(black, small_options()), Error);
+}
