@@ -66,6 +66,16 @@ struct CorrectorOptions {
   /// Correspondences per window: the PGO/BA window spans the keyframes of the newest
   /// `window_correspondences` correspondences (the paper: 3).
   int window_correspondences = 3;
+  /// Minimum window length in keyframes: the window is extended to older correspondences
+  /// until it spans at least this many keyframes (0 = exactly the paper's window). The paper's
+  /// window assumes anchors far apart (its KITTI protocol: >= 100 frames, about 33 keyframes,
+  /// so windows of >= 66 keyframes, which this default leaves unchanged). Street-view
+  /// panoramas every 5 m localize every 1-3 keyframes; the paper's window then shrinks to a
+  /// few keyframes held by lambda1 = 1e5 edges to the fixed past, the geo terms cannot turn or
+  /// rescale it, and the path keeps INIT's heading error (rendered KITTI 02 frames 0-300 with
+  /// 29 localized views: 11 m after 300 m with INIT+PGO). 30 keyframes is about 90 frames,
+  /// the covisibility span of a keyframe in that VO map.
+  int min_window_keyframes = 30;
   /// The first window after INIT starts at the first keyframe instead of at the keyframe of
   /// its oldest correspondence, and holds every correspondence so far (INIT's four too: a
   /// window from keyframe 0 anchored only by its newest three could roll about their line when
@@ -124,6 +134,8 @@ struct CorrectorOptions {
     if (window_correspondences < 2)
       return fail("window_correspondences " + std::to_string(window_correspondences) +
                   " must be >= 2");
+    if (min_window_keyframes < 0)
+      return fail("min_window_keyframes " + std::to_string(min_window_keyframes) + " must be >= 0");
     for (double l : {lambda1, lambda2, lambda3})
       if (!(std::isfinite(l) && l > 0)) return fail("PGO weights lambda1..3 must be finite, > 0");
     if (min_shared_points < 1) return fail("min_shared_points must be >= 1");
@@ -251,10 +263,17 @@ class Corrector {
     if (options_.mode == Mode::kInitOnly || options_.mode == Mode::kFullBatch) return;
     int first = n - options_.window_correspondences;
     if (first < 0) return;
+    // Dense anchors: extend the window to older correspondences until it is long enough
+    // (CorrectorOptions::min_window_keyframes).
+    const int k_newest = kf_index_.at(corr_[n - 1].keyframe);
+    while (first > 0 &&
+           k_newest - kf_index_.at(corr_[first].keyframe) + 1 < options_.min_window_keyframes)
+      --first;
     // The first window reaches back to keyframe 0 with every correspondence so far (INIT's):
     // without them its start is anchored by nothing, and three nearly collinear anchors leave
     // it free to roll about their line (simulated 08, interval 200: 54 m error downstream).
-    if (options_.first_window_from_start && first == first_window_) first = 0;
+    // A window extended back into INIT's correspondences is treated the same way.
+    if (options_.first_window_from_start && first <= first_window_) first = 0;
     if (options_.mode != Mode::kInitBa) run_pgo(first, n - 1);
     if (options_.mode != Mode::kInitPgo) run_ba(first, n - 1);
   }
