@@ -78,6 +78,11 @@ outputs in DIR (map frame M: the VO's own frame and arbitrary scale; geodrift ve
                       frame's pose is its raw relative pose to its keyframe composed with the
                       keyframe's final (bundle-adjusted) pose
   keyframes_kitti.txt keyframes only, with their frame index
+  with --geotags (frame W): trajectory.csv, trajectory_kitti.txt and trajectory_tum.txt hold the
+                      corrected path; correspondences.csv the localized views; attempts.csv
+                      every keyframe x view attempt (counts, inliers, tilt, position error);
+                      vo_keyframes_kitti.txt the uncorrected VO keyframes in M after a frame
+                      index (for a Sim(3)-aligned baseline with `geodrift eval`)
   model/              COLMAP text model (cameras.txt, images.txt, points3D.txt) of the VO map
   points.ply          map points in M
   report.json         version, command line, parameters, counts, lost frames, timings
@@ -425,6 +430,8 @@ int run_run(int argc, char** argv) {
       as << "," << reason << "\n";
     }
     if (!as) throw Error("cannot write " + out.path("attempts.csv"));
+    // The uncorrected VO keyframes (M) with their frame index, for a Sim(3)-aligned baseline.
+    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true);
     geo_written = true;
   }
 #endif
