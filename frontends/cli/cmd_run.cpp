@@ -59,6 +59,10 @@ inputs
                       PGO + BA). W = UTM grid at the first geo-tag's position.
   --geotag-gate M     after INIT, only retrieve views within M metres of the keyframe's
                       corrected position (default 50; 0 = never gate)
+  --geotag-every N    run retrieval + matching + localization on every N-th keyframe only
+                      (default 1: every keyframe; keyframes are ~1 m apart on a car, geo-tags
+                      often 5 m or more)
+  --geotag-top-k K    views tried per keyframe once the gate is active (default 5)
 
 options
   --fps F             frame rate for timestamps of an image folder without times.txt (default 10)
@@ -74,6 +78,11 @@ outputs in DIR (map frame M: the VO's own frame and arbitrary scale; geodrift ve
                       frame's pose is its raw relative pose to its keyframe composed with the
                       keyframe's final (bundle-adjusted) pose
   keyframes_kitti.txt keyframes only, with their frame index
+  with --geotags (frame W): trajectory.csv, trajectory_kitti.txt and trajectory_tum.txt hold the
+                      corrected path; correspondences.csv the localized views; attempts.csv
+                      every keyframe x view attempt (counts, inliers, tilt, position error);
+                      vo_keyframes_kitti.txt the uncorrected VO keyframes in M after a frame
+                      index (for a Sim(3)-aligned baseline with `geodrift eval`)
   model/              COLMAP text model (cameras.txt, images.txt, points3D.txt) of the VO map
   points.ply          map points in M
   report.json         version, command line, parameters, counts, lost frames, timings
@@ -87,8 +96,8 @@ std::string json_num(double v) {
 
 int run_run(int argc, char** argv) {
   const Args args(argc, argv,
-                  {"images", "video", "calib", "geotags", "geotag-gate", "fps", "max-frames",
-                   "features", "threads", "out"},
+                  {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every",
+                   "geotag-top-k", "fps", "max-frames", "features", "threads", "out"},
                   {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
@@ -105,6 +114,10 @@ int run_run(int argc, char** argv) {
                             ? parse_number_list("geotag-gate", args.get("geotag-gate")).at(0)
                             : 50.0;
   if (gate_m < 0) throw UsageError("--geotag-gate must be >= 0");
+  const long long geo_every = args.get_int("geotag-every", 1);
+  if (geo_every < 1) throw UsageError("--geotag-every must be >= 1");
+  const long long geo_top_k = args.get_int("geotag-top-k", 5);
+  if (geo_top_k < 1) throw UsageError("--geotag-top-k must be >= 1");
   const double fps = args.has("fps") ? parse_number_list("fps", args.get("fps")).at(0) : 10.0;
   if (!(fps > 0)) throw UsageError("--fps must be > 0");
   const long long max_frames = args.get_int("max-frames", -1);
@@ -188,10 +201,19 @@ int run_run(int argc, char** argv) {
     geotag::PipelineOptions po;
     po.gate = gate_m > 0;
     if (gate_m > 0) po.gate_radius_m = gate_m;
+    po.keyframe_stride = static_cast<int>(geo_every);
+    po.top_k_gated = static_cast<int>(geo_top_k);
     geo_loc = std::make_unique<geotag::GeoLocalizer>(*geo_db, geo_frame, po);
   }
   std::unordered_map<int, Eigen::Vector3d> geo_points;  // final map points, M
   int geo_attempts = 0, geo_corrs = 0;
+  // Every keyframe x view attempt, for attempts.csv: the view centre in the keyframe's camera
+  // frame (M units) is mapped to W through the keyframe's corrected pose at the end.
+  struct GeoAttemptRow {
+    geotag::ViewAttempt a;
+    Eigen::Vector3d center_k = Eigen::Vector3d::Constant(NAN);
+  };
+  std::vector<GeoAttemptRow> geo_rows;
   double geo_s = 0;
 #endif
 
@@ -231,6 +253,14 @@ int run_run(int argc, char** argv) {
             },
             est, &attempts);
         geo_attempts += static_cast<int>(attempts.size());
+        for (geotag::ViewAttempt& a : attempts) {
+          GeoAttemptRow row;
+          if (a.result.inliers > 0)
+            row.center_k = b.keyframe.T_cw.act(a.result.T_vm.inverse().translation());
+          a.result.inlier_indices.clear();
+          row.a = std::move(a);
+          geo_rows.push_back(std::move(row));
+        }
         for (const map::Correspondence& c : cs) corrector.add_correspondence(c);
         geo_corrs += static_cast<int>(cs.size());
       }
@@ -368,6 +398,40 @@ int run_run(int argc, char** argv) {
          << "," << io::detail::fmt(c.y_w.z()) << "," << c.inliers << ","
          << io::detail::fmt(c.reprojection_rms) << "\n";
     if (!cs) throw Error("cannot write " + out.path("correspondences.csv"));
+    std::ofstream as(out.path("attempts.csv"));
+    as << "# geodrift " << kVersion << " every keyframe x retrieved view attempt; x,y,z = the "
+       << "view's PnP centre mapped to W through the keyframe's corrected pose (empty without "
+       << "an estimate); dx = its horizontal distance to the geo-tag; " << wnote << "\n"
+       << "keyframe,frame,view,geotag,score,putative,kvld_kept,pairs_3d,inliers,rms_px,tilt_deg,"
+          "accepted,x,y,z,dx_m,reason\n";
+    for (const GeoAttemptRow& g : geo_rows) {
+      const geotag::ViewAttempt& a = g.a;
+      const int ki = corrector.keyframe_index(a.keyframe);
+      const geotag::GeoView& v = geo_db->views()[a.view];
+      const map::GeoTag& tag = geo_db->sources()[v.source].tag;
+      const Eigen::Vector3d y = geo_frame.to_world(tag.latitude_deg, tag.longitude_deg, tag.height);
+      as << a.keyframe << "," << (ki >= 0 ? corrector.keyframes()[ki].frame_index : -1) << ","
+         << a.view << "," << tag.id << "," << io::detail::fmt(a.score) << "," << a.putative << ","
+         << a.kept << "," << a.pairs_3d << "," << a.result.inliers << ","
+         << io::detail::fmt(a.result.rms_px) << ","
+         << (std::isfinite(a.tilt_deg) ? io::detail::fmt(a.tilt_deg) : "") << ","
+         << (a.result.ok ? 1 : 0) << ",";
+      if (ki >= 0 && g.center_k.allFinite()) {
+        const Eigen::Vector3d c = corrector.keyframe_sim3(ki).inverse().act(g.center_k);
+        as << io::detail::fmt(c.x()) << "," << io::detail::fmt(c.y()) << ","
+           << io::detail::fmt(c.z()) << ","
+           << io::detail::fmt(std::hypot(c.x() - y.x(), c.y() - y.y()));
+      } else {
+        as << ",,,";
+      }
+      std::string reason = a.result.reason;
+      for (char& ch : reason)
+        if (ch == ',' || ch == '\n') ch = ';';
+      as << "," << reason << "\n";
+    }
+    if (!as) throw Error("cannot write " + out.path("attempts.csv"));
+    // The uncorrected VO keyframes (M) with their frame index, for a Sim(3)-aligned baseline.
+    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true);
     geo_written = true;
   }
 #endif
@@ -415,7 +479,14 @@ int run_run(int argc, char** argv) {
         << ", \"views\": " << geo_db->views().size() << ", \"attempts\": " << geo_attempts
         << ", \"correspondences\": " << geo_corrs
         << ", \"database_seconds\": " << json_num(geotag_build_s)
-        << ", \"localization_seconds\": " << json_num(geo_s)
+        << ", \"localization_seconds\": " << json_num(geo_s) << ", \"every\": " << geo_every
+        << ", \"top_k_gated\": " << geo_top_k
+        << ", \"keyframes_queried\": " << geo_loc->stats().keyframes_queried
+        << ", \"cpu_seconds\": {\"retrieval\": " << json_num(geo_loc->stats().retrieval_cpu_s)
+        << ", \"orb_matching\": " << json_num(geo_loc->stats().orb_match_cpu_s)
+        << ", \"kvld\": " << json_num(geo_loc->stats().kvld_cpu_s)
+        << ", \"pnp\": " << json_num(geo_loc->stats().pnp_cpu_s)
+        << ", \"total\": " << json_num(geo_loc->stats().total_cpu_s) << "}"
         << ", \"frame\": " << io::detail::json_string(geo_frame.description()) << "}";
     else
 #endif

@@ -65,6 +65,19 @@ TEST_CASE("geotags CLI: usage and input errors exit non-zero with a message",
   CHECK(tmp.num_entries() == 1);
 }
 
+TEST_CASE("run CLI: the geo-tag cost options are validated before any work",
+          "[geotag][cli][errors]") {
+  test::TempDir tmp;
+  for (const char* bad : {"--geotag-every 0", "--geotag-every -3", "--geotag-top-k 0"}) {
+    const Run r = run("run --images " + tmp.path().string() + " --geotags " + tmp.path().string() +
+                      " " + bad + " --out " + tmp.file("out"));
+    INFO(bad << ": " << r.out);
+    CHECK(r.code == 2);
+    CHECK(r.out.find(std::string(bad).substr(0, std::string(bad).find(' '))) != std::string::npos);
+  }
+  CHECK(tmp.num_entries() == 0);
+}
+
 TEST_CASE("geotags CLI: build on the Lund photos and query one of them", "[geotag][cli][data]") {
   if (!std::filesystem::exists(kLund)) {
     WARN("Lund data not found at " << kLund);

@@ -158,6 +158,8 @@ TEST_CASE("Pipeline: a keyframe retrieves, matches and localizes the panorama vi
 
   int localized_right = 0;
   double max_err = 0, max_ang = 0;
+  std::vector<geotag::KeyframeFeatures> all_kf;
+  std::vector<std::vector<Eigen::Vector3d>> all_points;
   for (int i = 0; i < 4; ++i) {
     // Keyframe 3 m east and 2 m south of panorama i, looking 8 deg west of grid north.
     const Eigen::Vector3d kc = pano_c[i] + Eigen::Vector3d(3.0, -2.0, 0.1);
@@ -219,9 +221,44 @@ TEST_CASE("Pipeline: a keyframe retrieves, matches and localizes the panorama vi
       CHECK(c.inliers >= po.localize.min_inliers);
       CHECK(c.reprojection_rms <= po.localize.max_rms_px);
       if ((c_w - pano_c[i]).norm() < 0.5) ++localized_right;
+      for (const geotag::ViewAttempt& a : attempts)
+        if (a.correspondence == c.id) {
+          REQUIRE(std::isfinite(a.tilt_deg));
+          CHECK(a.tilt_deg < po.max_view_tilt_deg);
+        }
       max_err = std::max(max_err, (c_w - pano_c[i]).norm());
       max_ang = std::max(max_ang, ang);
     }
+    CHECK(loc.stats().keyframes_queried == 1);
+    CHECK(loc.stats().views_tried == static_cast<int>(attempts.size()));
+    all_kf.push_back(kf);
+    all_points.push_back(points);
+  }
+  {
+    // Cost controls: every 2nd keyframe only, at most one localized view per keyframe.
+    geotag::PipelineOptions po;
+    po.keyframe_stride = 2;
+    po.max_localized_per_keyframe = 1;
+    geotag::GeoLocalizer loc(db, frame, po);
+    std::vector<int> tried_keyframes;
+    for (int i = 0; i < 4; ++i) {
+      std::vector<geotag::ViewAttempt> attempts;
+      const std::vector<map::Correspondence> cs = loc.process(
+          all_kf[i], [&](int id) { return &all_points[i].at(id); }, nullptr, &attempts);
+      CHECK(cs.size() <= 1);
+      if (i % 2 == 1) CHECK(attempts.empty());
+      if (i % 2 == 0) CHECK(cs.size() == 1);  // the facade's view localizes (as above)
+      for (const geotag::ViewAttempt& a : attempts) tried_keyframes.push_back(a.keyframe);
+    }
+    for (int k : tried_keyframes) CHECK((k == 10 || k == 12));
+    const geotag::PipelineStats& st = loc.stats();
+    CHECK(st.keyframes_seen == 4);
+    CHECK(st.keyframes_queried == 2);
+    CHECK(st.retrieval_cpu_s > 0);
+    CHECK(st.total_cpu_s >=
+          0.99 * (st.retrieval_cpu_s + st.orb_match_cpu_s + st.kvld_cpu_s + st.pnp_cpu_s));
+    po.keyframe_stride = 0;
+    CHECK_THROWS_AS(geotag::GeoLocalizer(db, frame, po), InvalidArgument);
   }
   // Each keyframe localizes at least the panorama view facing its facade.
   INFO("worst centre error " << max_err << " m, worst rotation " << max_ang << " deg");

@@ -85,18 +85,25 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
   } catch (const cv::Exception&) {
     found = false;  // degenerate samples (e.g. all points collinear) make OpenCV throw
   }
+  const auto ransac_pose = [&] {
+    cv::Mat R_cv;
+    cv::Rodrigues(rvec, R_cv);
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    cv::cv2eigen(R_cv, R);
+    cv::cv2eigen(tvec, t);
+    return lie::SE3d(lie::SO3d(R), t);
+  };
   if (!found || static_cast<int>(inl.size()) < o.min_inliers) {
     r.reason = "PnP RANSAC found " + std::to_string(inl.size()) + " inliers, need " +
                std::to_string(o.min_inliers);
+    if (found && !inl.empty()) {  // the rejected RANSAC estimate, for diagnostics
+      r.T_vm = ransac_pose();
+      r.inliers = static_cast<int>(inl.size());
+    }
     return r;
   }
-  cv::Mat R_cv;
-  cv::Rodrigues(rvec, R_cv);
-  Eigen::Matrix3d R;
-  Eigen::Vector3d t;
-  cv::cv2eigen(R_cv, R);
-  cv::cv2eigen(tvec, t);
-  lie::SE3d T(lie::SO3d(R), t);
+  lie::SE3d T = ransac_pose();
 
   // Robust LM on all pairs from the RANSAC pose, then re-select inliers at the refined pose and
   // finish with plain least squares on them (twice: the inlier set can still change).

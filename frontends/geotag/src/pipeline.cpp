@@ -1,7 +1,9 @@
 #include "geodrift/geotag/pipeline.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <ctime>
 #include <list>
 
 #include "geodrift/error.hpp"
@@ -12,6 +14,14 @@
 #endif
 
 namespace geodrift::geotag {
+
+namespace {
+double thread_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+}  // namespace
 
 struct GeoLocalizer::Cache {
 #if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
@@ -41,6 +51,10 @@ GeoLocalizer::GeoLocalizer(const Database& db, const geo::LocalFrame& frame,
                  "GeoLocalizer: ratio " << options.ratio << " outside (0, 1]");
   GEODRIFT_CHECK(options.max_putative >= 0, "GeoLocalizer: max_putative must be >= 0");
   GEODRIFT_CHECK(options.top_k >= 1, "GeoLocalizer: top_k " << options.top_k << " must be >= 1");
+  GEODRIFT_CHECK(options.keyframe_stride >= 1,
+                 "GeoLocalizer: keyframe_stride " << options.keyframe_stride << " must be >= 1");
+  GEODRIFT_CHECK(options.top_k_gated >= 0 && options.max_localized_per_keyframe >= 0,
+                 "GeoLocalizer: top_k_gated and max_localized_per_keyframe must be >= 0");
   GEODRIFT_CHECK(options.gate_radius_m > 0,
                  "GeoLocalizer: gate radius " << options.gate_radius_m << " m must be > 0");
 }
@@ -58,7 +72,10 @@ bool GeoLocalizer::have_kvld() const {
 std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf, int view,
                                                      ViewAttempt* a) {
   const Features& vf = db_.orb(view);
+  const double c0 = thread_cpu_s();
   std::vector<cv::DMatch> m = match_ratio_mutual(kf.descriptors, vf.descriptors, options_.ratio);
+  const double c1 = thread_cpu_s();
+  stats_.orb_match_cpu_s += c1 - c0;
   if (options_.max_putative > 0 && static_cast<int>(m.size()) > options_.max_putative)
     m.resize(options_.max_putative);  // sorted by distance: the best are kept
   a->putative = static_cast<int>(m.size());
@@ -78,6 +95,7 @@ std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf,
                      kvld::keypoints_from_cv(vf.keypoints), put);
     for (const kvld::Match& k : r.matches) out.push_back({k.i1, k.i2});
     a->kept = static_cast<int>(out.size());
+    stats_.kvld_cpu_s += thread_cpu_s() - c1;
     return out;
   }
 #endif
@@ -97,14 +115,25 @@ std::vector<map::Correspondence> GeoLocalizer::process(
                  "keyframe " << kf.keyframe.id << ": " << kf.keypoints.size() << " keypoints, "
                              << kf.descriptors.rows << " descriptors, " << kf.point_ids.size()
                              << " point ids");
+  const auto w0 = std::chrono::steady_clock::now();
+  const double c0 = thread_cpu_s();
+  std::vector<map::Correspondence> out;
+  if (stats_.keyframes_seen++ % options_.keyframe_stride != 0) return out;
+  ++stats_.keyframes_queried;
   QueryOptions q;
   q.top_k = options_.top_k;
   q.frame = &frame_;
   q.gate_radius_m = options_.gate_radius_m;
-  if (options_.gate && position_w) q.gate_position_w = *position_w;
+  if (options_.gate && position_w) {
+    q.gate_position_w = *position_w;
+    if (options_.top_k_gated > 0) q.top_k = options_.top_k_gated;
+  }
   const std::vector<Retrieved> top = db_.query(kf.gray, q);
-  std::vector<map::Correspondence> out;
+  stats_.retrieval_cpu_s += thread_cpu_s() - c0;
   for (const Retrieved& r : top) {
+    if (options_.max_localized_per_keyframe > 0 &&
+        static_cast<int>(out.size()) >= options_.max_localized_per_keyframe)
+      break;
     if (r.score < options_.min_retrieval_score) continue;
     if (options_.localize_each_view_once && localized_.count(r.view)) continue;
     ViewAttempt a;
@@ -124,8 +153,10 @@ std::vector<map::Correspondence> GeoLocalizer::process(
       uv.push_back({vf.keypoints[iv].pt.x, vf.keypoints[iv].pt.y});
     }
     a.pairs_3d = static_cast<int>(X.size());
+    ++stats_.views_tried;
+    const double cp = thread_cpu_s();
     a.result = localize_view(X, uv, db_.views()[r.view].camera, options_.localize);
-    if (a.result.ok && options_.max_view_tilt_deg > 0 && db_.views()[r.view].direction >= 0) {
+    if (a.result.inliers > 0 && db_.views()[r.view].direction >= 0) {
       // Angle between the view's and the keyframe's "down" axes, both expressed in M.
       const Eigen::Vector3d down_v =
           a.result.T_vm.rotation().inverse().act(Eigen::Vector3d::UnitY());
@@ -133,12 +164,14 @@ std::vector<map::Correspondence> GeoLocalizer::process(
           kf.keyframe.T_cw.rotation().inverse().act(Eigen::Vector3d::UnitY());
       const double tilt =
           std::acos(std::clamp(down_v.dot(down_k), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
-      if (tilt > options_.max_view_tilt_deg) {
+      a.tilt_deg = tilt;
+      if (a.result.ok && options_.max_view_tilt_deg > 0 && tilt > options_.max_view_tilt_deg) {
         a.result.ok = false;
         a.result.reason = "view tilted " + std::to_string(tilt) +
                           " deg from the keyframe (panorama views are level)";
       }
     }
+    stats_.pnp_cpu_s += thread_cpu_s() - cp;
     if (a.result.ok) {
       a.correspondence = next_id_;
       out.push_back(make_correspondence(next_id_++, db_.views()[r.view], kf.keyframe, a.result,
@@ -147,6 +180,9 @@ std::vector<map::Correspondence> GeoLocalizer::process(
     }
     if (attempts) attempts->push_back(std::move(a));
   }
+  stats_.total_cpu_s += thread_cpu_s() - c0;
+  stats_.total_wall_s +=
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
   return out;
 }
 

@@ -47,7 +47,8 @@ struct LocalizeOptions {
 struct LocalizeResult {
   bool ok = false;
   std::string reason;  ///< why it was rejected (empty when ok)
-  lie::SE3d T_vm;      ///< M -> view camera (valid when ok, else the last estimate)
+  lie::SE3d T_vm;      ///< M -> view camera (valid when ok, else the last estimate: the
+                       ///< RANSAC pose when RANSAC found too few inliers, identity if none)
   int correspondences = 0;
   int inliers = 0;
   double rms_px = 0;

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -58,6 +59,31 @@ struct PipelineOptions {
   /// than this is rejected as a wrong localization (10 deg: an 18 % grade plus margin). Not
   /// applied to photos (their pitch and roll are unknown); <= 0 disables it.
   double max_view_tilt_deg = 10.0;
+  /// Cost controls (the per-keyframe work is RootSIFT + retrieval, then per view ORB matching,
+  /// K-VLD and PnP). Adjacent keyframes of a car are ~1 m apart while panoramas are 5 m
+  /// apart, so consecutive keyframes retrieve and try the same views:
+  /// - keyframe_stride: run the pipeline on every n-th keyframe only (1 = every keyframe);
+  /// - top_k_gated: views tried per keyframe when a gate position is given (after INIT the
+  ///   gate already removes far views; 0 = top_k);
+  /// - max_localized_per_keyframe: stop trying views of a keyframe once this many localized
+  ///   (0 = try all top-k).
+  int keyframe_stride = 1;
+  int top_k_gated = 0;
+  int max_localized_per_keyframe = 0;
+};
+
+/// Accumulated cost of the pipeline, in thread CPU seconds (robust on a loaded machine) and
+/// wall seconds.
+struct PipelineStats {
+  int keyframes_seen = 0;     ///< process() calls
+  int keyframes_queried = 0;  ///< of those, not skipped by keyframe_stride
+  int views_tried = 0;
+  double retrieval_cpu_s = 0;  ///< RootSIFT on the keyframe + vocabulary + tf-idf scoring
+  double orb_match_cpu_s = 0;  ///< ratio + mutual ORB matching
+  double kvld_cpu_s = 0;       ///< K-VLD incl. scale spaces of keyframe and view images
+  double pnp_cpu_s = 0;        ///< PnP RANSAC + LM (+ tilt check)
+  double total_cpu_s = 0;
+  double total_wall_s = 0;
 };
 
 /// The outcome of one keyframe x view attempt.
@@ -69,6 +95,9 @@ struct ViewAttempt {
   int kept = 0;      ///< after K-VLD (= putative when K-VLD is off)
   int pairs_3d = 0;  ///< kept matches with a map point
   LocalizeResult result;
+  /// Angle (deg) between the view's and the keyframe's down axes for the PnP estimate (NaN
+  /// when PnP gave no estimate; only computed for panorama views).
+  double tilt_deg = std::numeric_limits<double>::quiet_NaN();
   int correspondence = -1;  ///< Correspondence::id when the view localized, else -1
 };
 
@@ -99,6 +128,7 @@ class GeoLocalizer {
 
   bool have_kvld() const;
   const std::set<int>& localized_views() const { return localized_; }
+  const PipelineStats& stats() const { return stats_; }
 
  private:
   struct Cache;
@@ -107,6 +137,7 @@ class GeoLocalizer {
   PipelineOptions options_;
   int next_id_ = 0;
   std::set<int> localized_;
+  PipelineStats stats_;
   std::unique_ptr<Cache> cache_;
 };
 
