@@ -17,7 +17,7 @@ struct OrbOptions {
   int num_levels = 8;         ///< pyramid levels
   int fast_threshold = 12;    ///< FAST threshold (grey levels)
   int cell_size = 40;         ///< grid cell, level-0 pixels
-  int oversample = 3;         ///< detector budget = oversample * num_features
+  double oversample = 1.5;    ///< detector budget = oversample * num_features (>= 1)
 };
 
 /// Keypoints (cv::KeyPoint: pixel, size, angle, octave) and their 256-bit descriptors
