@@ -1,4 +1,5 @@
-// Minimal ORB monocular SfM: tracking + local mapping, synchronous (see odometry.hpp).
+// Minimal ORB monocular SfM: tracking + local mapping in a fixed order, mapping overlapped with
+// the next frame's ORB extraction (see odometry.hpp).
 
 #include "geodrift/vo/odometry.hpp"
 

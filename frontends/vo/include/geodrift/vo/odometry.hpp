@@ -1,7 +1,7 @@
 #pragma once
 /// @file
 /// geodrift::vo::Odometry — a minimal ORB monocular SfM in the manner of ORB-SLAM's tracking and
-/// local mapping threads, run synchronously (deterministic):
+/// local mapping threads, in a fixed order (deterministic; see "Threads" below):
 ///
 ///   frame ─► ORB (grid) ─► [not initialised] two-view init against a reference frame, retried on
 ///                          later frames, reference renewed when it gets too old
