@@ -4,10 +4,12 @@
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -196,4 +198,22 @@ TEST_CASE("Two-view initialisation refuses pure rotation with a reason", "[vo][d
   CHECK(r.model == vo::TwoViewResult::Model::kHomography);
   CHECK((r.reason.find("parallax") != std::string::npos ||
          r.reason.find("pure rotation") != std::string::npos));
+}
+
+TEST_CASE("ORB Hamming distance counts differing bits", "[vo]") {
+  std::mt19937_64 rng(7);
+  for (int trial = 0; trial < 1000; ++trial) {
+    std::uint8_t a[32], b[32];
+    int expected = 0;
+    for (int i = 0; i < 32; ++i) {
+      a[i] = static_cast<std::uint8_t>(rng());
+      b[i] = static_cast<std::uint8_t>(rng());
+      for (int bit = 0; bit < 8; ++bit) expected += ((a[i] ^ b[i]) >> bit) & 1;
+    }
+    REQUIRE(vo::hamming(a, b) == expected);
+  }
+  std::uint8_t z[32] = {}, o[32];
+  std::memset(o, 0xff, sizeof o);
+  CHECK(vo::hamming(z, o) == 256);
+  CHECK(vo::hamming(o, o) == 0);
 }

@@ -16,10 +16,11 @@ OrbExtractor::OrbExtractor(const OrbOptions& o) : options_(o) {
   GEODRIFT_CHECK(o.scale_factor > 1.0f, "scale_factor " << o.scale_factor << " must be > 1");
   GEODRIFT_CHECK(o.num_levels >= 1, "num_levels " << o.num_levels << " must be >= 1");
   GEODRIFT_CHECK(o.cell_size >= 8, "cell_size " << o.cell_size << " must be >= 8");
-  GEODRIFT_CHECK(o.oversample >= 1, "oversample " << o.oversample << " must be >= 1");
+  GEODRIFT_CHECK(o.oversample >= 1.0, "oversample " << o.oversample << " must be >= 1");
   for (int l = 0; l < o.num_levels; ++l) scales_.push_back(std::pow(double(o.scale_factor), l));
-  orb_ = cv::ORB::create(o.num_features * o.oversample, o.scale_factor, o.num_levels, 19, 0, 2,
-                         cv::ORB::HARRIS_SCORE, 31, o.fast_threshold);
+  orb_ =
+      cv::ORB::create(static_cast<int>(std::lround(o.num_features * o.oversample)), o.scale_factor,
+                      o.num_levels, 19, 0, 2, cv::ORB::HARRIS_SCORE, 31, o.fast_threshold);
 }
 
 Features OrbExtractor::extract(const cv::Mat& gray) const {

@@ -1,4 +1,5 @@
-// Minimal ORB monocular SfM: tracking + local mapping, synchronous (see odometry.hpp).
+// Minimal ORB monocular SfM: tracking + local mapping in a fixed order, mapping overlapped with
+// the next frame's ORB extraction (see odometry.hpp).
 
 #include "geodrift/vo/odometry.hpp"
 
@@ -8,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <future>
 #include <map>
 #include <opencv2/calib3d.hpp>
 #include <sstream>
@@ -87,6 +89,42 @@ struct FrameData {
           if (kp.pt.x >= u0 && kp.pt.x <= u1 && kp.pt.y >= v0 && kp.pt.y <= v1) f(k);
         }
   }
+  /// The keypoints of for_each_in_box(u0, v0, u1, v1) that lie within `reach` pixels of the
+  /// segment a-b, and possibly some others; same visiting order as for_each_in_box (grid rows,
+  /// then columns, then cell order), so a caller that filters by the segment gets the same result.
+  /// Visits only the cells of each grid row that the segment, dilated by `reach`, can touch.
+  template <class F>
+  void for_each_near_segment(const Eigen::Vector2d& a, const Eigen::Vector2d& b, double reach,
+                             double u0, double v0, double u1, double v1, F f) const {
+    const int y0 = std::clamp(static_cast<int>(v0 / kGridCell), 0, gh - 1);
+    const int y1 = std::clamp(static_cast<int>(v1 / kGridCell), 0, gh - 1);
+    const Eigen::Vector2d ab = b - a;
+    for (int y = y0; y <= y1; ++y) {
+      // Segment parameters t in [0, 1] whose row coordinate lies in the row band +- reach.
+      const double lo = y * kGridCell - reach, hi = (y + 1) * kGridCell + reach;
+      double t0 = 0, t1 = 1;
+      if (std::abs(ab.y()) < 1e-12) {
+        if (a.y() < lo || a.y() > hi) continue;
+      } else {
+        double ta = (lo - a.y()) / ab.y(), tb = (hi - a.y()) / ab.y();
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+        if (t0 > t1) continue;
+      }
+      const double ua = a.x() + t0 * ab.x(), ub = a.x() + t1 * ab.x();
+      const double cu0 = std::max(u0, std::min(ua, ub) - reach);
+      const double cu1 = std::min(u1, std::max(ua, ub) + reach);
+      if (cu0 > cu1) continue;
+      const int x0 = std::clamp(static_cast<int>(cu0 / kGridCell), 0, gw - 1);
+      const int x1 = std::clamp(static_cast<int>(cu1 / kGridCell), 0, gw - 1);
+      for (int x = x0; x <= x1; ++x)
+        for (int k : grid[y * gw + x]) {
+          const cv::KeyPoint& kp = kps[k];
+          if (kp.pt.x >= u0 && kp.pt.x <= u1 && kp.pt.y >= v0 && kp.pt.y <= v1) f(k);
+        }
+    }
+  }
   const std::uint8_t* d(int k) const { return desc.ptr<std::uint8_t>(k); }
   Eigen::Vector2d uv(int k) const { return {kps[k].pt.x, kps[k].pt.y}; }
 };
@@ -136,6 +174,7 @@ struct Odometry::Impl {
   int ref_kf = -1;
   int last_kf_frame = -1;
   int lost_frames = 0;
+  int pending_mapping = -1;  ///< keyframe whose local mapping has not run yet
 
   Impl(const map::Camera& c, const OdometryOptions& o) : cam(c), opt(o), orb(o.orb) {
     for (int l = 0; l < o.orb.num_levels; ++l) {
@@ -225,7 +264,8 @@ struct Odometry::Impl {
   }
 
   // ---------------------------------------------------------------- features / matching
-  FrameData make_frame(const Frame& f) {
+  /// Features of a frame. Touches no map state (safe on a second thread while mapping runs).
+  FrameData make_frame(const Frame& f, double* seconds) const {
     const auto t0 = Clock::now();
     FrameData fd;
     fd.index = f.index;
@@ -236,7 +276,7 @@ struct Odometry::Impl {
     fd.desc = feats.descriptors;
     fd.image = f.gray;
     fd.build_grid(cam.width, cam.height);
-    timings.features += since(t0);
+    *seconds = since(t0);
     return fd;
   }
 
@@ -714,7 +754,20 @@ struct Odometry::Impl {
     ref_kf = kid;
     cull_recent_points(kid);
     timings.keyframe += since(t0);
-    t0 = Clock::now();
+    pending_mapping = kid;
+    if (!opt.pipeline_mapping) run_pending_mapping();
+  }
+
+  /// Local mapping of the newest keyframe: triangulation, local BA, keyframe culling, handing out
+  /// final keyframes. With pipeline_mapping it runs at the start of the next process() call (or
+  /// in finish()/map()), while that frame's ORB features are extracted on a second thread: it
+  /// still completes before that frame is tracked, so the results are those of the synchronous
+  /// order, bit for bit.
+  void run_pending_mapping() {
+    if (pending_mapping < 0) return;
+    const int kid = pending_mapping;
+    pending_mapping = -1;
+    auto t0 = Clock::now();
     triangulate(kid);
     timings.triangulation += since(t0);
     t0 = Clock::now();
@@ -783,6 +836,12 @@ struct Odometry::Impl {
         if (pid >= 0 && !pt(pid).bad) z1.push_back(k1.T_cw.act(pt(pid).X).z());
       if (z1.empty()) continue;
       const double zmin = 0.5 * *std::min_element(z1.begin(), z1.end());
+      // A keypoint of the box that passes the epipolar-line test below (distance <= 1.96 sigma,
+      // at most w px) lies within `reach` of the segment: along the line it can pass a segment
+      // end by at most sqrt(2) (margin + w) inside the box. So the strip query visits every
+      // candidate the box query would, in the same order.
+      const double w = 1.96 * scale.back();
+      const double reach = std::sqrt(2.0) * (6.0 + w) + w + 1.0;
       std::vector<int> owner(k2.kps.size(), -1), owner_d(k2.kps.size(), 256);
       std::vector<int> match(k1.kps.size(), -1);
       for (std::size_t i = 0; i < k1.kps.size(); ++i) {
@@ -795,8 +854,8 @@ struct Odometry::Impl {
         const Eigen::Vector3d l = F21 * Eigen::Vector3d(k1.kps[i].pt.x, k1.kps[i].pt.y, 1.0);
         const double ln2 = l.head<2>().squaredNorm();
         int best = 256, second = 256, bk = -1;
-        k2.for_each_in_box(
-            std::min(pa.x(), pb.x()) - margin, std::min(pa.y(), pb.y()) - margin,
+        k2.for_each_near_segment(
+            pa, pb, reach, std::min(pa.x(), pb.x()) - margin, std::min(pa.y(), pb.y()) - margin,
             std::max(pa.x(), pb.x()) + margin, std::max(pa.y(), pb.y()) + margin, [&](int j) {
               if (k2.pt[j] >= 0) return;
               const double e = l.x() * k2.kps[j].pt.x + l.y() * k2.kps[j].pt.y + l.z();
@@ -1060,7 +1119,24 @@ FrameResult Odometry::process(const Frame& frame) {
   GEODRIFT_CHECK(frame.gray.cols == m.cam.width && frame.gray.rows == m.cam.height,
                  "frame " << frame.index << " is " << frame.gray.cols << "x" << frame.gray.rows
                           << ", the camera is " << m.cam.width << "x" << m.cam.height);
-  FrameData f = m.make_frame(frame);
+  FrameData f;
+  double feature_s = 0;
+  if (m.pending_mapping >= 0) {
+    // ORB of this frame on a second thread while the previous keyframe's local mapping runs
+    // here (the callback stays on the caller's thread); both finish before tracking.
+    std::future<FrameData> next = std::async(
+        std::launch::async, [&m, &frame, &feature_s] { return m.make_frame(frame, &feature_s); });
+    try {
+      m.run_pending_mapping();
+    } catch (...) {
+      next.wait();
+      throw;
+    }
+    f = next.get();
+  } else {
+    f = m.make_frame(frame, &feature_s);
+  }
+  m.timings.features += feature_s;
   const int nf = static_cast<int>(f.kps.size());
   FrameResult r = m.initialized ? m.track(std::move(f)) : m.try_initialize(std::move(f));
   r.features = nf;
@@ -1068,6 +1144,7 @@ FrameResult Odometry::process(const Frame& frame) {
 }
 
 void Odometry::finish() {
+  impl_->run_pending_mapping();
   for (auto& k : impl_->kfs)
     if (!k->bad && !k->final) impl_->finalize_keyframe(*k);
 }
@@ -1075,6 +1152,7 @@ void Odometry::finish() {
 bool Odometry::initialized() const { return impl_->initialized; }
 
 map::Map Odometry::map() const {
+  impl_->run_pending_mapping();
   const Impl& m = *impl_;
   map::Map out;
   out.cameras.push_back(m.cam);
@@ -1102,6 +1180,9 @@ KeyframeView Odometry::keyframe_view(int id) const {
   GEODRIFT_CHECK(id >= 0 && id < static_cast<int>(impl_->kfs.size()) &&
                      !impl_->kfs[static_cast<std::size_t>(id)]->bad,
                  "keyframe " << id << " does not exist or was culled");
+  impl_->run_pending_mapping();
+  GEODRIFT_CHECK(!impl_->kfs[static_cast<std::size_t>(id)]->bad,
+                 "keyframe " << id << " was culled");
   return impl_->view_of(*impl_->kfs[static_cast<std::size_t>(id)]);
 }
 

@@ -17,7 +17,7 @@ struct OrbOptions {
   int num_levels = 8;         ///< pyramid levels
   int fast_threshold = 12;    ///< FAST threshold (grey levels)
   int cell_size = 40;         ///< grid cell, level-0 pixels
-  int oversample = 3;         ///< detector budget = oversample * num_features
+  double oversample = 1.5;    ///< detector budget = oversample * num_features (>= 1)
 };
 
 /// Keypoints (cv::KeyPoint: pixel, size, angle, octave) and their 256-bit descriptors
@@ -42,6 +42,19 @@ class OrbExtractor {
   cv::Ptr<cv::Feature2D> orb_;
 };
 
+/// Bits set in a 64-bit word: the popcnt instruction where the build targets it, else an inline
+/// SWAR count (a generic x86-64 build would otherwise call libgcc's table-based __popcountdi2).
+inline int popcount64(std::uint64_t x) {
+#if defined(__POPCNT__)
+  return __builtin_popcountll(x);
+#else
+  x = x - ((x >> 1) & 0x5555555555555555ULL);
+  x = (x & 0x3333333333333333ULL) + ((x >> 2) & 0x3333333333333333ULL);
+  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0fULL;
+  return static_cast<int>((x * 0x0101010101010101ULL) >> 56);
+#endif
+}
+
 /// Hamming distance between two 32-byte ORB descriptors.
 inline int hamming(const std::uint8_t* a, const std::uint8_t* b) {
   int d = 0;
@@ -49,7 +62,7 @@ inline int hamming(const std::uint8_t* a, const std::uint8_t* b) {
     std::uint64_t x, y;
     __builtin_memcpy(&x, a + i, 8);
     __builtin_memcpy(&y, b + i, 8);
-    d += __builtin_popcountll(x ^ y);
+    d += popcount64(x ^ y);
   }
   return d;
 }

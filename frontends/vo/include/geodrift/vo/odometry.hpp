@@ -1,7 +1,7 @@
 #pragma once
 /// @file
 /// geodrift::vo::Odometry — a minimal ORB monocular SfM in the manner of ORB-SLAM's tracking and
-/// local mapping threads, run synchronously (deterministic):
+/// local mapping threads, in a fixed order (deterministic; see "Threads" below):
 ///
 ///   frame ─► ORB (grid) ─► [not initialised] two-view init against a reference frame, retried on
 ///                          later frames, reference renewed when it gets too old
@@ -14,6 +14,12 @@
 ///                          the covisibility window through the core solver (Schur), culling of
 ///                          bad observations/points and redundant keyframes
 ///                       ─► [lost] relocalisation: descriptor matching to recent keyframes + PnP
+///
+/// Threads (OdometryOptions::pipeline_mapping, default on): the local mapping of a keyframe runs
+/// during the next process() call on the caller's thread while that frame's ORB features are
+/// extracted on a second thread; it always completes before the frame is tracked, so the
+/// results do not depend on timing (identical to pipeline_mapping = false). The keyframe
+/// callback is always called on the caller's thread, from process(), finish() or map().
 ///
 /// Keyframes are handed out (callback `on_keyframe_final`) once they can no longer change: when
 /// `finalize_lag` newer keyframes exist (so they have left the local BA window) or at finish().
@@ -76,6 +82,12 @@ struct OdometryOptions {
   int num_threads = 1;                ///< core solver threads (1 or 2)
   int finalize_lag = 12;              ///< keyframes newer than a keyframe before it is final
   bool keep_final_images = false;     ///< keep KeyframeView images after handing them out
+  /// Run a keyframe's local mapping (triangulation, local BA, culling, handing out final
+  /// keyframes) at the start of the next process() call, overlapped with that frame's ORB
+  /// extraction on a second thread. Mapping still completes before the frame is tracked, so the
+  /// results are bit-identical to the synchronous order (false: mapping inside the process() call
+  /// that made the keyframe, one thread).
+  bool pipeline_mapping = true;
 };
 
 /// Per-frame outcome.
@@ -124,14 +136,17 @@ class Odometry {
 
   bool initialized() const;
   /// The current map: live keyframes, points with >= 2 observations, their observations.
+  /// Completes a pending local mapping first (may call the keyframe callback).
   map::Map map() const;
   /// The view of a live keyframe (image only while it is not final, or keep_final_images).
   /// @throws InvalidArgument for an unknown or culled keyframe id.
   KeyframeView keyframe_view(int keyframe_id) const;
   /// Frames whose pose was estimated, by frame index, with their T_cw (map frame M).
   const std::vector<std::pair<int, lie::SE3d>>& frame_poses() const;
-  int num_keyframes() const;  ///< live keyframes
-  int num_points() const;     ///< live map points
+  /// Live keyframes / map points, as of the last completed local mapping (a pending one, see
+  /// pipeline_mapping, is not forced: cheap enough for a progress line).
+  int num_keyframes() const;
+  int num_points() const;
   const OdometryTimings& timings() const;
   const map::Camera& camera() const;
   /// Initialisation attempts and the reason of the last failure (for reports).
