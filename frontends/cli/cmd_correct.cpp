@@ -56,6 +56,19 @@ options
                       (default 1, the consecutive chain; measured on simulated KITTI 02 without
                       a map: 1 link 1.3 m, 2 links 1.9 m, 5 links 9.0 m mean 2D error, as each
                       edge carries the paper's weight 1e5 and stiffens the graph against anchors)
+  --first-window W    from-start (default) | paper: the first window after INIT reaches back to
+                      the first keyframe and holds INIT's anchors too (from-start), or spans
+                      only the keyframes of its newest 3 anchors (paper; measured on simulated
+                      KITTI 08 it let the first windows roll about nearly collinear anchors)
+  --ba-min-parallax DEG
+                      bundle adjustment leaves out map points whose rays from the window's
+                      keyframes span less than DEG degrees (they move with their reference
+                      keyframe); default 1.146 (ORB-SLAM's triangulation limit), 0 keeps all,
+                      must be in [0, 90)
+  --ba-cost-tolerance-sd X
+                      bundle adjustment stops when a step lowers the cost by less than X
+                      standard deviations of the cost at the noise level (sqrt(m/2) for m
+                      scalar residuals); default 0.1, must be >= 0 (0: the solver's own limits)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --help              this text
@@ -142,13 +155,30 @@ void check_anchor_geometry(const std::vector<io::Anchor>& a, const std::string& 
   }
 }
 
+/// A finite number given to --`key`, or `def` when absent. @throws UsageError otherwise.
+double number_option(const Args& args, const std::string& key, double def) {
+  if (!args.has(key)) return def;
+  const std::string v = args.get(key);
+  std::size_t pos = 0;
+  double x = 0;
+  try {
+    x = std::stod(v, &pos);
+  } catch (const std::exception&) {
+    pos = 0;
+  }
+  if (pos == 0 || pos != v.size() || !std::isfinite(x))
+    throw UsageError("option --" + key + ": '" + v + "' is not a finite number");
+  return x;
+}
+
 }  // namespace
 
 int run_correct(int argc, char** argv) {
-  const Args args(argc, argv,
-                  {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
-                   "keyframe-step", "links", "out"},
-                  {"help", "force"});
+  const Args args(
+      argc, argv,
+      {"trajectory", "format", "times", "map", "anchors", "mode", "origin", "keyframe-step",
+       "links", "first-window", "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
+      {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -177,6 +207,19 @@ int run_correct(int argc, char** argv) {
     throw UsageError("--mode init+ba needs --map (bundle adjustment needs map points)");
   opt.link_consecutive = true;
   opt.consecutive_links = static_cast<int>(links);
+  const std::string first_window = args.get("first-window", "from-start");
+  if (first_window != "from-start" && first_window != "paper")
+    throw UsageError("--first-window: '" + first_window + "' is not from-start or paper");
+  opt.first_window_from_start = first_window == "from-start";
+  opt.ba_min_parallax_deg = number_option(args, "ba-min-parallax", opt.ba_min_parallax_deg);
+  opt.ba_cost_tolerance_sd = number_option(args, "ba-cost-tolerance-sd", opt.ba_cost_tolerance_sd);
+  if (!(opt.ba_min_parallax_deg >= 0 && opt.ba_min_parallax_deg < 90))
+    throw UsageError("--ba-min-parallax must be in [0, 90) degrees");
+  if (!(opt.ba_cost_tolerance_sd >= 0)) throw UsageError("--ba-cost-tolerance-sd must be >= 0");
+  {
+    std::string why;
+    if (!opt.validate(&why)) throw UsageError("invalid correction options: " + why);
+  }
   // Check --out before the work (StagedOutput below re-checks and stages).
   {
     std::error_code ec;
@@ -427,7 +470,10 @@ int run_correct(int argc, char** argv) {
       << ", \"lambda1\": " << json_num(opt.lambda1) << ", \"lambda2\": " << json_num(opt.lambda2)
       << ", \"lambda3\": " << json_num(opt.lambda3)
       << ", \"min_shared_points\": " << opt.min_shared_points
-      << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px) << "}"
+      << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px)
+      << ", \"first_window\": " << io::detail::json_string(first_window)
+      << ", \"ba_min_parallax_deg\": " << json_num(opt.ba_min_parallax_deg)
+      << ", \"ba_cost_tolerance_sd\": " << json_num(opt.ba_cost_tolerance_sd) << "}"
       << ",\n  \"counts\": {\"poses\": " << np << ", \"keyframes\": " << nk
       << ", \"points\": " << corrector.num_points() << ", \"anchors\": " << anchors.size()
       << ", \"correspondences_used\": " << corrector.correspondences().size() << "}"
@@ -447,6 +493,7 @@ int run_correct(int argc, char** argv) {
         << r.window_first_keyframe << ", " << r.window_last_keyframe << "], \"nodes\": " << r.nodes
         << ", \"edges\": " << r.edges << ", \"initial_cost\": " << json_num(r.initial_cost)
         << ", \"final_cost\": " << json_num(r.final_cost) << ", \"iterations\": " << r.iterations
+        << ", \"skipped_points\": " << r.skipped_points
         << ", \"termination\": " << io::detail::json_string(r.termination)
         << ", \"seconds\": " << json_num(r.seconds) << "}";
     }

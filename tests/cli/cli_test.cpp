@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
@@ -92,6 +93,34 @@ double mean_2d(const std::string& json) {
   return std::stod(json.substr(p + key.size()));
 }
 
+/// Every number following `"key": ` in a JSON text, in order.
+std::vector<double> json_numbers(const std::string& json, const std::string& key) {
+  std::vector<double> v;
+  const std::string k = "\"" + key + "\": ";
+  for (auto p = json.find(k); p != std::string::npos; p = json.find(k, p + 1)) {
+    std::size_t q = p + k.size();
+    if (json[q] == '[') ++q;  // the first element of an array
+    v.push_back(std::stod(json.substr(q)));
+  }
+  return v;
+}
+
+/// Total LM iterations of report.json's steps of `kind` ("pgo", "ba").
+int step_iterations(const std::string& json, const std::string& kind) {
+  int n = 0;
+  const std::string k = "{\"kind\": \"" + kind + "\"";
+  for (auto p = json.find(k); p != std::string::npos; p = json.find(k, p + 1))
+    n += static_cast<int>(json_numbers(json.substr(p, json.find('}', p) - p), "iterations").at(0));
+  return n;
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream is(path);
+  std::stringstream ss;
+  ss << is.rdbuf();
+  return ss.str();
+}
+
 }  // namespace
 
 TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no output", "[cli]") {
@@ -173,6 +202,16 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
                    {"no_such_traj.txt"});
     expect_failure(correct(good, "--map " + t.path("no_such_map")), {"no_such_map"});
   }
+  SECTION("bad values of the correction options") {
+    expect_failure(correct(good, "--ba-min-parallax 90"), {"--ba-min-parallax", "[0, 90)"});
+    expect_failure(correct(good, "--ba-min-parallax -1"), {"--ba-min-parallax", "[0, 90)"});
+    expect_failure(correct(good, "--ba-min-parallax 1deg"), {"--ba-min-parallax", "1deg"});
+    expect_failure(correct(good, "--ba-cost-tolerance-sd -0.5"),
+                   {"--ba-cost-tolerance-sd", ">= 0"});
+    expect_failure(correct(good, "--ba-cost-tolerance-sd nan"),
+                   {"--ba-cost-tolerance-sd", "not a finite number"});
+    expect_failure(correct(good, "--first-window later"), {"--first-window", "later"});
+  }
   SECTION("an unknown option or mode") {
     const Run r = correct(good, "--bogus 1");
     expect_failure(r, {"unknown option", "--bogus"});
@@ -251,6 +290,48 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
         "track.kml", "points.ply", "topview.svg", "scale.svg", "report.json"})
     CHECK(fs::exists(t.path("ours/") + f));
   CHECK_FALSE(fs::exists(t.path("traj/points.ply")));
+
+  // The three options reach the Corrector and report.json records them.
+  {
+    const std::string rep = read_text(t.path("ours/report.json"));
+    CHECK(rep.find("\"first_window\": \"from-start\"") != std::string::npos);
+    REQUIRE(json_numbers(rep, "ba_min_parallax_deg").size() == 1);
+    CHECK(json_numbers(rep, "ba_min_parallax_deg")[0] == Approx(1.146));
+    CHECK(json_numbers(rep, "ba_cost_tolerance_sd")[0] == Approx(0.1));
+    const Run c = run("correct " + in + " " + map +
+                      " --first-window paper --ba-min-parallax 0 --ba-cost-tolerance-sd 1000"
+                      " --out " +
+                      t.path("opts"));
+    INFO(c.output);
+    REQUIRE(c.code == 0);
+    const std::string rep2 = read_text(t.path("opts/report.json"));
+    CHECK(rep2.find("\"first_window\": \"paper\"") != std::string::npos);
+    CHECK(json_numbers(rep2, "ba_min_parallax_deg")[0] == 0.0);
+    CHECK(json_numbers(rep2, "ba_cost_tolerance_sd")[0] == 1000.0);
+    // Default: some BA window leaves low-parallax points out; with 0 none does.
+    const auto skipped = json_numbers(rep, "skipped_points");
+    const auto skipped2 = json_numbers(rep2, "skipped_points");
+    REQUIRE(!skipped.empty());
+    CHECK(*std::max_element(skipped.begin(), skipped.end()) > 0);
+    CHECK(*std::max_element(skipped2.begin(), skipped2.end()) == 0);
+    // The first window after INIT: from keyframe 0 by default, later with the paper's.
+    const auto windows = json_numbers(rep, "window_keyframes");
+    const auto windows2 = json_numbers(rep2, "window_keyframes");
+    REQUIRE(windows.size() >= 2);  // [0] is INIT's (-1), [1] the first PGO's first keyframe
+    REQUIRE(windows2.size() >= 2);
+    CHECK(windows[1] == 0);
+    CHECK(windows2[1] > 0);
+    // A tolerance of 1000 SD stops each BA at its first accepted step.
+    int ba_steps = 0;
+    for (auto p = rep2.find("{\"kind\": \"ba\""); p != std::string::npos;
+         p = rep2.find("{\"kind\": \"ba\"", p + 1))
+      ++ba_steps;
+    REQUIRE(ba_steps > 0);
+    INFO("BA iterations: default " << step_iterations(rep, "ba") << ", tolerance 1000 SD "
+                                   << step_iterations(rep2, "ba"));
+    CHECK(step_iterations(rep2, "ba") < step_iterations(rep, "ba"));
+    CHECK(step_iterations(rep2, "ba") <= 2 * ba_steps);
+  }
 
   // A NaN in the map is named by file and line, and nothing is written.
   fs::copy(t.path("sim/colmap"), t.path("badmap"));
