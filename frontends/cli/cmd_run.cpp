@@ -340,7 +340,7 @@ int run_run(int argc, char** argv) {
   // ---- outputs ------------------------------------------------------------------------------
   StagedOutput out(out_dir, args.flag("force"));
   const std::string note =
-      "M = geodrift VO map frame (first keyframe = origin, arbitrary scale); no geo-tags";
+      "M = geodrift VO map frame (first keyframe = origin, arbitrary scale; not geo-referenced)";
   bool geo_written = false;
 #if defined(GEODRIFT_CLI_HAS_GEOTAG)
   if (geo_loc) {
@@ -439,7 +439,8 @@ int run_run(int argc, char** argv) {
     io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note);
     io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note);
   }
-  io::write_trajectory_kitti(out.path("keyframes_kitti.txt"), kf_traj, note);
+  io::write_trajectory_kitti(out.path("keyframes_kitti.txt"), kf_traj, note,
+                             /*write_frame_index=*/true);
   std::filesystem::create_directory(out.path("model"));
   io::write_colmap_text(out.path("model"), m, note);
   {
@@ -497,7 +498,8 @@ int run_run(int argc, char** argv) {
       << ", \"tracking\": " << json_num(t.tracking) << ", \"keyframe\": " << json_num(t.keyframe)
       << ", \"triangulation\": " << json_num(t.triangulation)
       << ", \"local_ba\": " << json_num(t.local_ba) << ", \"local_ba_runs\": " << t.local_ba_runs
-      << ", \"culling\": " << json_num(t.culling) << "}\n}\n";
+      << ", \"culling\": " << json_num(t.culling)
+      << ", \"keyframe_handover\": " << json_num(t.handover) << "}\n}\n";
     io::detail::write_atomically(out.path("report.json"), [&](std::ostream& os) { os << j.str(); });
   }
   out.commit();

@@ -84,7 +84,10 @@ TEST_CASE("On a simulated stretch of KITTI 08 at interval 300, BA after PGO does
   // The failure this guards against: the sliding-window BA clamped to keyframes that only INIT
   // had placed, turning the heading and bending the path by tens of metres between anchors
   // (Ours 9.1 m against INIT+PGO 5.6 m on this stretch before the first window reached back
-  // to keyframe 0).
+  // to keyframe 0). It is a regression check on this stretch, not a general guarantee: on
+  // frames 0-1500 of the same seed Ours measured 5.93 m against INIT+PGO 4.95 m (+20 %), with
+  // full batch also above PGO (the simulator's pixels come from the drifted map, so BA pulls
+  // toward the drifted shape between anchors; docs/RESULTS.md).
   const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
   const sim::KittiSequence seq = sim::load_kitti_sequence(
       dir + "/poses/08.txt", dir + "/calib_seq04-12.txt", dir + "/times/08.txt");

@@ -10,6 +10,7 @@
 
 #include "corridor.hpp"
 #include "geodrift/error.hpp"
+#include "geodrift/io/trajectory.hpp"
 #include "geodrift/vo/input.hpp"
 #include "geodrift/vo/odometry.hpp"
 #include "support/test_files.hpp"
@@ -211,5 +212,41 @@ TEST_CASE("geodrift run fails cleanly on bad input and leaves no output", "[vo][
     CHECK_THAT(r.output, Catch::Contains(c.expect));
     CHECK(no_outputs(t, "out"));
   }
+}
+#endif
+
+#ifdef GEODRIFT_CLI_EXE
+TEST_CASE("geodrift run on an image folder writes the reconstruction, keyframes with frame index",
+          "[vo][cli]") {
+  test::TempDir t;
+  const map::Camera cam = test::corridor_camera();
+  const test::Corridor world;
+  const int n = 60;
+  fs::create_directories(t.path() / "drive");
+  for (int i = 0; i < n; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.png", i);
+    cv::imwrite((t.path() / "drive" / name).string(), world.render(cam, test::Corridor::pose(i)));
+  }
+  test::write_text((t.path() / "drive" / "calib.txt").string(), "K: 360 0 320 0 360 120 0 0 1\n");
+  const Run r = run("run --images " + t.file("drive") + " --out " + t.file("out"));
+  INFO(r.output);
+  REQUIRE(r.code == 0);
+  for (const char* f :
+       {"trajectory_kitti.txt", "trajectory_tum.txt", "keyframes_kitti.txt", "model/cameras.txt",
+        "model/images.txt", "model/points3D.txt", "points.ply", "report.json"})
+    CHECK(fs::exists(t.path() / "out" / f));
+  const io::Trajectory all = io::read_trajectory(t.file("out/trajectory_kitti.txt"));
+  const io::Trajectory kfs = io::read_trajectory(t.file("out/keyframes_kitti.txt"));
+  CHECK(all.poses.size() >= static_cast<std::size_t>(0.95 * n));
+  // Keyframes carry the frame index they were taken at (eval matches poses by it).
+  REQUIRE(kfs.has_frame_index);
+  REQUIRE(kfs.poses.size() >= 5);
+  CHECK(kfs.poses.back().frame > static_cast<int>(kfs.poses.size()));
+  for (std::size_t i = 1; i < kfs.poses.size(); ++i)
+    CHECK(kfs.poses[i].frame > kfs.poses[i - 1].frame);
+  // A second run into the same folder is refused: nothing the user has is overwritten.
+  const Run again = run("run --images " + t.file("drive") + " --out " + t.file("out"));
+  CHECK(again.code != 0);
 }
 #endif

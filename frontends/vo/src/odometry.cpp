@@ -776,8 +776,10 @@ struct Odometry::Impl {
     ++timings.local_ba_runs;
     t0 = Clock::now();
     cull_keyframes(kid);
-    finalize_old();
     timings.culling += since(t0);
+    t0 = Clock::now();
+    finalize_old();
+    timings.handover += since(t0);
     // The last frame's matches are the new keyframe's (live) observations.
     for (std::size_t i = 0; i < last.pt.size(); ++i) last.pt[i] = kf(kid).pt[i];
   }

@@ -113,6 +113,9 @@ struct FrameResult {
 struct OdometryTimings {
   double features = 0, init = 0, tracking = 0, keyframe = 0, triangulation = 0, local_ba = 0,
          culling = 0;
+  /// Handing final keyframes out, including the time spent in the keyframe callback (for
+  /// `geodrift run --geotags`: the geo-tag localization and the Corrector).
+  double handover = 0;
   int local_ba_runs = 0;
 };
 
