@@ -460,7 +460,10 @@ TEST_CASE("kAuto picks the block Cholesky on a chain and CHOLMOD on mixed block 
   CHECK(s.linear_solver == "block-cholesky");
   CHECK(s.converged());
   CHECK(s.final_cost == Approx(sr.final_cost).epsilon(1e-10));
-  CHECK(max_pose_error(g.poses, ref.poses) < 1e-8);
+  // The chain-only graph is flat along its weakly constrained far end: block Cholesky, CHOLMOD
+  // and a dense solve stop (|δ| ≈ 5e-13, costs equal to 1e-15) 2e-8 … 6.5e-8 apart in pose, so the
+  // bound is 1e-7 (a wrong factor moves the optimum by orders more; see the cost check above).
+  CHECK(max_pose_error(g.poses, ref.poses) < 1e-7);
   // Solving again reuses the analysis.
   const solver::Summary s2 = lm.solve(&p);
   CHECK(s2.time_analyze == 0.0);
