@@ -3,16 +3,16 @@
 // outside the timed loop and cycled through (rotation angles up to π, translations up to 1e3 m,
 // σ in [−1, 1]), so both the series and closed-form branches are exercised.
 
-#include "geodrift/lie/se3.hpp"
-#include "geodrift/lie/sim3.hpp"
-#include "geodrift/lie/so3.hpp"
-
-#include <Eigen/Core>
 #include <benchmark/benchmark.h>
 
+#include <Eigen/Core>
 #include <cmath>
 #include <random>
 #include <vector>
+
+#include "geodrift/lie/se3.hpp"
+#include "geodrift/lie/sim3.hpp"
+#include "geodrift/lie/so3.hpp"
 
 namespace {
 
@@ -166,7 +166,79 @@ void BM_ActJacobian(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 
+/// Near-identity inputs, the regime of a pose-graph residual E = dS_ij·S_i·S_j⁻¹ (θ ≤ 0.05 rad,
+/// |σ| ≤ 0.05, |ν| ≤ 2 m) and its measurement / pose pair.
+template <class Group>
+struct NearIdentity {
+  std::vector<Group> E, dS;
+  NearIdentity() {
+    std::mt19937 rng(11);
+    std::normal_distribution<double> n(0.0, 1.0);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < kPool; ++i) {
+      typename Group::Tangent xi;
+      const Eigen::Vector3d w(0.03 * u(rng), 0.03 * u(rng), 0.03 * u(rng));
+      const Eigen::Vector3d v(u(rng), u(rng), u(rng));
+      if constexpr (Group::kDoF == 6) {
+        xi << w, v;
+      } else {
+        xi << w, 0.05 * u(rng), v;
+      }
+      E.push_back(Group::exp(xi));
+      dS.push_back(Group::exp(make_tangent<Group>(rng)));
+    }
+  }
+};
+
+template <class Group>
+const NearIdentity<Group>& near_identity() {
+  static const NearIdentity<Group> in;
+  return in;
+}
+
+template <class Group>
+void BM_LogJacobianNearIdentity(benchmark::State& state) {
+  const auto& in = near_identity<Group>();
+  typename Group::Jacobian J;
+  int i = 0;
+  for (auto _ : state) {
+    typename Group::Tangent xi = in.E[i++ & (kPool - 1)].log(&J);
+    benchmark::DoNotOptimize(xi.data());
+    benchmark::DoNotOptimize(J.data());
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+
+/// What a relative-pose residual needs per edge: r = log E with Jl⁻¹(r), and the two Jacobians
+/// Jl⁻¹·Ad(dS), −Jl⁻¹·Ad(E); argument 0: dense products with adjoint(), 1: times_adjoint().
+template <class Group>
+void BM_RelativePoseJacobiansNearIdentity(benchmark::State& state) {
+  const auto& in = near_identity<Group>();
+  typename Group::Jacobian J, Ji, Jj;
+  int i = 0;
+  for (auto _ : state) {
+    const int k = i++ & (kPool - 1);
+    typename Group::Tangent xi = in.E[k].log(&J);
+    if (state.range(0) == 0) {  // dense 7x7 products with the formed adjoints
+      Ji.noalias() = J * in.dS[k].adjoint();
+      Jj.noalias() = -J * in.E[k].adjoint();
+    } else {  // what RelativePoseResidual does
+      Ji = in.dS[k].times_adjoint(J);
+      Jj = -in.E[k].times_adjoint(J);
+    }
+    benchmark::DoNotOptimize(xi.data());
+    benchmark::DoNotOptimize(Ji.data());
+    benchmark::DoNotOptimize(Jj.data());
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+
 }  // namespace
+
+BENCHMARK_TEMPLATE(BM_LogJacobianNearIdentity, lie::SE3d);
+BENCHMARK_TEMPLATE(BM_LogJacobianNearIdentity, lie::Sim3d);
+BENCHMARK_TEMPLATE(BM_RelativePoseJacobiansNearIdentity, lie::SE3d)->Arg(0)->Arg(1);
+BENCHMARK_TEMPLATE(BM_RelativePoseJacobiansNearIdentity, lie::Sim3d)->Arg(0)->Arg(1);
 
 #define GEODRIFT_LIE_BENCH(Group)                \
   BENCHMARK_TEMPLATE(BM_Exp, Group);             \

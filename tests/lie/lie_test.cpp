@@ -2,6 +2,8 @@
 // Jl·Jl⁻¹ = I, closed forms against Eigen's matrix exponential, conversions, bad input, float.
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <array>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <complex>
@@ -386,6 +388,76 @@ TEST_CASE("Taylor branches agree with the closed forms evaluated in long double"
       CHECK(rel(k.c2s, c2s) < 1e-12);
       CHECK(rel(k.c1t, c1t) < 1e-10);
       CHECK(rel(k.c2t, c2t) < 1e-9);
+    }
+  }
+}
+
+TEST_CASE("Sim3 reduced theta series agree with the full series and the closed forms",
+          "[lie][taylor][sim3]") {
+  // sim3_coeffs uses M < kSim3ThetaSeriesTerms terms below kSim3ThetaSeriesBound[M]; there the
+  // reduced series must equal the full one to rounding, for every coefficient and derivative.
+  namespace detail = geodrift::lie::detail;
+  const auto rel = [](double a, double b) {
+    return std::abs(a - b) / std::max(std::abs(b), 1e-300);
+  };
+  const auto all = [](const detail::VCoeffs<double>& k) {
+    return std::array<double, 8>{k.c0, k.c1, k.c2, k.c0s, k.c1s, k.c2s, k.c1t, k.c2t};
+  };
+  for (int M = 4; M < lie::kSim3ThetaSeriesTerms; ++M) {
+    const double bound = detail::kSim3ThetaSeriesBound[M];
+    for (double th : {0.0, 1e-9, 0.5 * bound, 0.999 * bound}) {
+      if (detail::sim3_theta_series_terms(th) > M) continue;
+      for (double sg : {-6.0, -1.0, -1e-3, 0.0, 0.02, 0.7, 3.9, 4.1}) {
+        INFO("M " << M << " theta " << th << " sigma " << sg);
+        const auto red = all(detail::sim3_coeffs_series<double>(th, sg, M, true));
+        const auto full =
+            all(detail::sim3_coeffs_series<double>(th, sg, lie::kSim3ThetaSeriesTerms, true));
+        for (int i = 0; i < 8; ++i) {
+          INFO("coefficient " << i);
+          CHECK(rel(red[i], full[i]) < 4e-16);
+        }
+      }
+    }
+  }
+  // Dispatch: the chosen M grows with θ and uses the full series from 0.275 to 0.5.
+  CHECK(detail::sim3_theta_series_terms(1e-3) == 4);
+  CHECK(detail::sim3_theta_series_terms(0.03) == 5);
+  CHECK(detail::sim3_theta_series_terms(0.1) == 6);
+  CHECK(detail::sim3_theta_series_terms(0.2) == 7);
+  CHECK(detail::sim3_theta_series_terms(0.3) == lie::kSim3ThetaSeriesTerms);
+  // With 3 terms the series would be visibly wrong at θ = 6e-3 (the test can fail): its c1t
+  // misses the θ⁴ term, 2.5e-13 relative.
+  const auto three = all(detail::sim3_coeffs_series<double>(6e-3, 0.1, 3, true));
+  const auto ref = all(detail::sim3_coeffs_series<double>(6e-3, 0.1, 8, true));
+  CHECK(rel(three[6], ref[6]) > 1e-14);
+}
+
+TEMPLATE_TEST_CASE(
+    "times_adjoint equals the product with the adjoint; Sim3 log shares its "
+    "coefficients with left_jacobian_inverse",
+    "[lie]", SE3d, Sim3d) {
+  using G = TestType;
+  std::mt19937 rng(91);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int k = 0; k < 200; ++k) {
+    typename G::Tangent xi, xi_small;
+    for (int i = 0; i < G::kDoF; ++i) {
+      xi[i] = (k % 2 ? 1.0 : 50.0) * n(rng);
+      xi_small[i] = 0.01 * n(rng);
+    }
+    xi.template head<3>() = xi.template head<3>().normalized() * std::fmod(std::abs(n(rng)), 3.0);
+    if constexpr (G::kDoF == 7) xi[3] = 0.5 * n(rng);
+    const G X = G::exp(xi);
+    typename G::Jacobian M;
+    for (int i = 0; i < M.size(); ++i) M.data()[i] = n(rng);
+    const typename G::Jacobian ref = M * X.adjoint();
+    CHECK((X.times_adjoint(M) - ref).norm() <= 1e-13 * (1.0 + ref.norm()));
+    for (const G& Y : {X, G::exp(xi_small)}) {
+      typename G::Jacobian J;
+      const typename G::Tangent l = Y.log(&J);
+      const typename G::Jacobian Jref = G::left_jacobian_inverse(l);
+      CHECK((J - Jref).norm() <= 1e-14 * (1.0 + Jref.norm()));
+      CHECK((l - Y.log()).norm() <= 1e-15 * (1.0 + l.norm()));
     }
   }
 }

@@ -460,7 +460,10 @@ TEST_CASE("kAuto picks the block Cholesky on a chain and CHOLMOD on mixed block 
   CHECK(s.linear_solver == "block-cholesky");
   CHECK(s.converged());
   CHECK(s.final_cost == Approx(sr.final_cost).epsilon(1e-10));
-  CHECK(max_pose_error(g.poses, ref.poses) < 1e-8);
+  // The chain-only graph is flat along its weakly constrained far end: block Cholesky, CHOLMOD
+  // and a dense solve stop (|δ| ≈ 5e-13, costs equal to 1e-15) 2e-8 … 6.5e-8 apart in pose, so the
+  // bound is 1e-7 (a wrong factor moves the optimum by orders more; see the cost check above).
+  CHECK(max_pose_error(g.poses, ref.poses) < 1e-7);
   // Solving again reuses the analysis.
   const solver::Summary s2 = lm.solve(&p);
   CHECK(s2.time_analyze == 0.0);
@@ -518,5 +521,60 @@ TEST_CASE("Speculative linearisation and the damping limit change the cost, not 
   for (std::size_t k = 1; k < sums.size(); ++k) {
     CHECK(sums[k].final_cost == Approx(sums[0].final_cost).epsilon(1e-10));
     CHECK(max_pose_error(graphs[k].poses, graphs[0].poses) < 1e-8);
+  }
+}
+
+TEST_CASE("One LevenbergMarquardt reuses its symbolic analysis across problems of the same pattern",
+          "[solver][reuse]") {
+  // Sliding-window use: a sequence of DIFFERENT Problem objects (other measurements, other start
+  // values) with the same block pattern, solved by one LM object. From the second on the analysis
+  // is reused, and every result equals a fresh LM's (which analyses from scratch). A problem of
+  // another pattern is analysed again and is still solved correctly; the first pattern after it
+  // is analysed again too (one cached analysis).
+  for (const auto type :
+       {LinearSolverType::kCholmod, LinearSolverType::kBlockCholesky, LinearSolverType::kAuto}) {
+    LevenbergMarquardt shared(tight(type));
+    const struct {
+      int n;
+      unsigned seed;
+      bool reused;
+    } runs[] = {{30, 1, false}, {30, 2, true},  {30, 3, true},
+                {36, 4, false}, {30, 5, false}, {30, 6, true}};
+    for (const auto& run : runs) {
+      INFO("type " << static_cast<int>(type) << " n " << run.n << " seed " << run.seed);
+      PoseGraph<lie::Sim3d> g(run.n, 0.01, run.seed), ref(run.n, 0.01, run.seed);
+      Problem p, pr;
+      g.build(&p);
+      ref.build(&pr);
+      const solver::Summary s = shared.solve(&p);
+      LevenbergMarquardt fresh(tight(type));
+      const solver::Summary sr = fresh.solve(&pr);
+      INFO(s.brief_report());
+      CHECK(s.analysis_reused == run.reused);
+      CHECK((s.time_analyze == 0.0) == run.reused);
+      CHECK_FALSE(sr.analysis_reused);
+      CHECK(s.converged());
+      CHECK(s.final_cost < 1e-2 * s.initial_cost);
+      CHECK(s.final_cost == Approx(sr.final_cost).epsilon(1e-12));
+      CHECK(s.iterations == sr.iterations);
+      CHECK(max_pose_error(g.poses, ref.poses) < 1e-10);
+    }
+  }
+  // BA windows through the Schur path: same cameras/points/visibility, other noise and start.
+  LevenbergMarquardt shared(tight(LinearSolverType::kSchur));
+  for (unsigned seed : {51u, 52u, 53u}) {
+    INFO("BA seed " << seed);
+    BaScene a(6, 50, seed), b(6, 50, seed);
+    Problem pa, pb;
+    a.build(&pa, RobustLoss::huber(1.0));
+    b.build(&pb, RobustLoss::huber(1.0));
+    const solver::Summary s = shared.solve(&pa);
+    const solver::Summary sr = LevenbergMarquardt(tight(LinearSolverType::kSchur)).solve(&pb);
+    INFO(s.brief_report());
+    CHECK(s.analysis_reused == (seed != 51u));
+    CHECK(s.converged());
+    CHECK(s.final_cost == Approx(sr.final_cost).epsilon(1e-12));
+    for (std::size_t j = 0; j < a.points.size(); ++j)
+      CHECK((a.points[j] - b.points[j]).norm() < 1e-9 * (1.0 + b.points[j].norm()));
   }
 }

@@ -6,7 +6,6 @@
 /// Perturbations are on the LEFT, X ← exp(δ)·X (DESIGN.md).
 
 #include <Eigen/Core>
-
 #include <ostream>
 
 namespace geodrift::lie {

@@ -5,12 +5,12 @@
 /// Tangent ξ = (ω, ν) ∈ R⁶ (DESIGN.md order: rotation first). All Jacobians are w.r.t. LEFT
 /// perturbations T ← exp(δ)·T.
 
+#include <Eigen/Core>
+
 #include "geodrift/error.hpp"
 #include "geodrift/lie/detail/so3_details.hpp"
 #include "geodrift/lie/lie_group_base.hpp"
 #include "geodrift/lie/so3.hpp"
-
-#include <Eigen/Core>
 
 namespace geodrift::lie {
 
@@ -105,6 +105,19 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
     Jacobian A;
     A << R, Eigen::Matrix<Scalar, 3, 3>::Zero(), skew<Scalar>(t_) * R, R;
     return A;
+  }
+
+  /// M·Ad(T) for any 6x6 M without forming Ad(T): with M = [M_ω M_ν] by column blocks,
+  ///   M·Ad(T) = [ (M_ω + M_ν·[t]x)·R   M_ν·R ]   (equals M * adjoint() to rounding).
+  Jacobian times_adjoint(const Jacobian& M) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    Eigen::Matrix<Scalar, 3, 3> tR;
+    for (int k = 0; k < 3; ++k) tR.col(k) = t_.cross(R.col(k));
+    Jacobian out;
+    out.template leftCols<3>().noalias() = M.template leftCols<3>() * R;
+    out.template leftCols<3>().noalias() += M.template rightCols<3>() * tR;
+    out.template rightCols<3>().noalias() = M.template rightCols<3>() * R;
+    return out;
   }
 
   /// Exact left Jacobian Jl(ξ) = Σ_k ad_ξᵏ/(k+1)!, with exp(ξ + dξ) = exp(Jl·dξ)·exp(ξ):

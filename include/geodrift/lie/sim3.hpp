@@ -6,17 +6,16 @@
 /// w.r.t. LEFT perturbations S ← exp(δ)·S. The left Jacobian and its inverse are exact (no
 /// first-order shortcut): see detail/sim3_details.hpp for the derivation.
 
+#include <Eigen/Core>
+#include <Eigen/LU>
+#include <cmath>
+
 #include "geodrift/error.hpp"
 #include "geodrift/lie/detail/sim3_details.hpp"
 #include "geodrift/lie/detail/so3_details.hpp"
 #include "geodrift/lie/lie_group_base.hpp"
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/so3.hpp"
-
-#include <Eigen/Core>
-#include <Eigen/LU>
-
-#include <cmath>
 
 namespace geodrift::lie {
 
@@ -74,18 +73,22 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   }
 
   /// log: Sim(3) → sim(3), θ ∈ [0, π], σ = log s, ν = C(ω,σ)⁻¹·t.
-  /// @param J_xi_S (7x7, optional) = Jl⁻¹(log S): d(log S)/dδ for S ← exp(δ)·S.
+  /// @param J_xi_S (7x7, optional) = Jl⁻¹(log S): d(log S)/dδ for S ← exp(δ)·S. The
+  ///        coefficients of C and their derivatives are evaluated once and shared by ν and the
+  ///        Jacobian (same values as left_jacobian_inverse(log S)).
   Tangent log(Jacobian* J_xi_S = nullptr) const {
     using std::log;
     const Point omega = R_.log();
     const Scalar sigma = log(s_);
-    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), sigma, false);
+    const detail::VCoeffs<Scalar> c =
+        detail::sim3_coeffs<Scalar>(omega.norm(), sigma, J_xi_S != nullptr);
+    const Eigen::Matrix<Scalar, 3, 3> Ci = v_matrix(omega, c).inverse();
     // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
     Tangent xi;
     xi.template segment<3>(kOmega) = omega;
     xi[kSigma] = sigma;
-    xi.template segment<3>(kNu) = v_matrix(omega, c).inverse() * t_;
-    if (J_xi_S) *J_xi_S = left_jacobian_inverse(xi);
+    xi.template segment<3>(kNu) = Ci * t_;
+    if (J_xi_S) inverse_blocks(omega, xi.template segment<3>(kNu), c, Ci, J_xi_S);
     return xi;
   }
 
@@ -135,6 +138,27 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     A.template block<3, 1>(kNu, kSigma) = -t_;
     A.template block<3, 3>(kNu, kNu) = s_ * R;
     return A;
+  }
+
+  /// M·Ad(S) for any 7x7 M without forming Ad(S) (a residual's Jacobian through a composition):
+  /// with M = [M_ω M_σ M_ν] by column blocks,
+  ///   M·Ad(S) = [ (M_ω + M_ν·[t]x)·R   M_σ − M_ν·t   s·M_ν·R ]
+  /// (210 multiply-adds instead of 343; equals M * adjoint() to rounding).
+  Jacobian times_adjoint(const Jacobian& M) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    const auto Mw = M.template leftCols<3>();
+    const auto Mn = M.template rightCols<3>();
+    const Eigen::Matrix<Scalar, kDoF, 3> MnR = Mn * R;
+    Jacobian out;
+    // [t]x·R = t × (columns of R); M_ν·[t]x·R = M_ν·(t × R).
+    Eigen::Matrix<Scalar, 3, 3> tR;
+    for (int k = 0; k < 3; ++k) tR.col(k) = t_.cross(R.col(k));
+    out.template leftCols<3>().noalias() = Mw * R;
+    out.template leftCols<3>().noalias() += Mn * tR;
+    out.col(kSigma) = M.col(kSigma);
+    out.col(kSigma).noalias() -= Mn * t_;
+    out.template rightCols<3>() = s_ * MnR;
+    return out;
   }
 
   /// Exact left Jacobian Jl(ξ) = Σ_k ad_ξᵏ/(k+1)!, exp(ξ + dξ) = exp(Jl·dξ)·exp(ξ); rows/cols
@@ -200,6 +224,22 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
                                               const detail::VCoeffs<Scalar>& c) {
     const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
     return c.c0 * Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
+  }
+
+  // Jl⁻¹(ξ) for ξ = (ω, σ, ν) given the coefficients c (with derivatives) and C⁻¹ of that ξ.
+  static void inverse_blocks(const Point& omega, const Point& nu, const detail::VCoeffs<Scalar>& c,
+                             const Eigen::Matrix<Scalar, 3, 3>& Ci, Jacobian* Jli) {
+    const Eigen::Matrix<Scalar, 3, 3> J = detail::so3_left_jacobian<Scalar>(omega);
+    Eigen::Matrix<Scalar, 3, 3> A;
+    Point b;
+    detail::translation_rows<Scalar>(omega, nu, c, J, &A, &b);
+    const Eigen::Matrix<Scalar, 3, 3> Ji = detail::so3_left_jacobian_inverse<Scalar>(omega);
+    Jli->setZero();
+    Jli->template block<3, 3>(kOmega, kOmega) = Ji;
+    (*Jli)(kSigma, kSigma) = Scalar(1);
+    Jli->template block<3, 3>(kNu, kOmega).noalias() = -Ci * (A * Ji);
+    Jli->template block<3, 1>(kNu, kSigma).noalias() = -Ci * b;
+    Jli->template block<3, 3>(kNu, kNu) = Ci;
   }
 
   // Fills Jl and/or Jl⁻¹ (either may be null) from one evaluation of the coefficients.

@@ -5,16 +5,15 @@
 /// Tangent ω ∈ R³ (axis·angle). All Jacobians are w.r.t. LEFT perturbations
 /// R ← exp(δ)·R, in the tangent order of DESIGN.md.
 
-#include "geodrift/error.hpp"
-#include "geodrift/lie/detail/so3_details.hpp"
-#include "geodrift/lie/lie_group_base.hpp"
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
-
 #include <cmath>
 #include <limits>
+
+#include "geodrift/error.hpp"
+#include "geodrift/lie/detail/so3_details.hpp"
+#include "geodrift/lie/lie_group_base.hpp"
 
 namespace geodrift::lie {
 

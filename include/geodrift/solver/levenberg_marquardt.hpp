@@ -222,9 +222,12 @@ struct Summary {
   int num_residuals = 0;
   double factor_nnz = 0.0;
   std::string linear_solver;
-  double time_evaluate = 0.0;   ///< residuals + Jacobians (incl. cost-only trial evaluations) [s]
-  double time_assemble = 0.0;   ///< H += JᵀJ, g += Jᵀr [s]
-  double time_analyze = 0.0;    ///< symbolic analysis (0 when reused) [s]
+  double time_evaluate = 0.0;  ///< residuals + Jacobians (incl. cost-only trial evaluations) [s]
+  double time_assemble = 0.0;  ///< H += JᵀJ, g += Jᵀr [s]
+  double time_analyze = 0.0;   ///< symbolic analysis (0 when reused) [s]
+  /// True when this solve() reused the symbolic analysis kept by the LevenbergMarquardt object
+  /// from an earlier solve() of the same pattern (the same Problem or another one).
+  bool analysis_reused = false;
   double time_factorize = 0.0;  ///< numeric factorisation (incl. Schur elimination) [s]
   double time_solve = 0.0;      ///< triangular solves / back-substitution [s]
   double time_total = 0.0;      ///< whole solve() [s]
@@ -257,6 +260,30 @@ struct Summary {
 
 /// LM over a Problem. Keeps its linear solver (and symbolic analysis) between solve() calls
 /// while the problem's pattern is unchanged.
+///
+/// Reusing the symbolic analysis across repeated solves. The analysis (fill-reducing ordering,
+/// CHOLMOD's supernodal symbolic factor or the block Cholesky's column structures, the Schur
+/// complement's pattern) belongs to this object, not to the Problem, and is keyed by the block
+/// pattern (BlockStructure::pattern(): block sizes, which blocks couple, the number of
+/// Schur-eliminated blocks). So a caller that solves many problems of the SAME structure (sliding
+/// windows of equal length and connectivity, a user re-solving after new measurements or new
+/// start values) keeps ONE LevenbergMarquardt alive and calls solve() on each Problem:
+///
+///   solver::LevenbergMarquardt lm(options);         // once
+///   for (each window) {
+///     solver::Problem p;                             // new values, same pattern
+///     ... add the same kinds of blocks in the same order, same constant blocks ...
+///     const solver::Summary s = lm.solve(&p);        // s.analysis_reused, s.time_analyze == 0
+///   }
+///
+/// The pattern is compared on every solve() (O(number of blocks)); a different pattern is
+/// analysed again automatically (and, with kAuto, the solver type chosen again), so reuse is
+/// never wrong, only sometimes not possible. Reuse needs an equal block pattern, which holds when
+/// the problems have the same parameter blocks (sizes) in the same order of first use
+/// (add_residual_block order), the same constant blocks and the same couplings; residual values,
+/// weights, losses and states may all differ. Changing Options::linear_solver through
+/// set_options() drops the analysis. Tested in tests/solver/solver_problems_test.cpp ("One
+/// LevenbergMarquardt reuses its symbolic analysis across problems of the same pattern").
 class LevenbergMarquardt {
  public:
   explicit LevenbergMarquardt(Options options = {}) : options_(options) {}
@@ -313,7 +340,8 @@ class LevenbergMarquardt {
       analyzed_ = false;
     }
     sum.linear_solver = solver_->name();
-    if (!analyzed_ || !s.same_pattern(pattern_)) {
+    sum.analysis_reused = analyzed_ && s.same_pattern(pattern_);
+    if (!sum.analysis_reused) {
       const auto t0 = Clock::now();
       const LinearSolverStatus st = solver_->analyze(s);
       sum.time_analyze = std::chrono::duration<double>(Clock::now() - t0).count();

@@ -23,17 +23,63 @@
 ///   (2m−2) θ^{2m−4} g_{2m}/(2m)!
 /// and g_k(σ) itself has a power series for small |σ| (covering σ → 0 and θ, σ → 0 together).
 
-#include "geodrift/lie/constants.hpp"
-#include "geodrift/lie/detail/so3_details.hpp"
-
 #include <cmath>
 #include <complex>
 #include <limits>
+
+#include "geodrift/lie/constants.hpp"
+#include "geodrift/lie/detail/so3_details.hpp"
 
 namespace geodrift::lie::detail {
 
 /// Highest σ-moment index the θ² series needs: g_{2M} with M = kSim3ThetaSeriesTerms.
 inline constexpr int kSim3MaxMoment = 2 * kSim3ThetaSeriesTerms;
+
+/// 1/k! for k = 0..kSim3MaxMoment + 1 (the series' factorials, no division in the loops).
+inline constexpr double kInvFactorial[kSim3MaxMoment + 2] = {1.0,
+                                                             1.0,
+                                                             1.0 / 2.0,
+                                                             1.0 / 6.0,
+                                                             1.0 / 24.0,
+                                                             1.0 / 120.0,
+                                                             1.0 / 720.0,
+                                                             1.0 / 5040.0,
+                                                             1.0 / 40320.0,
+                                                             1.0 / 362880.0,
+                                                             1.0 / 3628800.0,
+                                                             1.0 / 39916800.0,
+                                                             1.0 / 479001600.0,
+                                                             1.0 / 6227020800.0,
+                                                             1.0 / 87178291200.0,
+                                                             1.0 / 1307674368000.0,
+                                                             1.0 / 20922789888000.0,
+                                                             1.0 / 355687428096000.0};
+
+/// 1/k for k = 0..kSim3MaxMoment (entry 0 unused).
+inline constexpr double kInvInteger[kSim3MaxMoment + 1] = {
+    0.0,     1.0,      1.0 / 2,  1.0 / 3,  1.0 / 4,  1.0 / 5,  1.0 / 6,  1.0 / 7, 1.0 / 8,
+    1.0 / 9, 1.0 / 10, 1.0 / 11, 1.0 / 12, 1.0 / 13, 1.0 / 14, 1.0 / 15, 1.0 / 16};
+
+/// Number of θ² series terms M used for a given θ < kSim3ThetaSeries. The truncation of every
+/// coefficient's series (c1, c2, their σ- and θ-derivatives; the worst are c2s and c1t, whose
+/// first dropped term is O(θ^{2M−2})) relative to its leading term is, with M terms at θ below
+/// kSim3ThetaSeriesBound[M], at most what kSim3ThetaSeriesTerms terms give at θ =
+/// kSim3ThetaSeries (1.8e-18 for nominal moments g_k = 1/(k+1); the σ-dependence of the moments,
+/// a factor ≤ e^{2|σ|}, is the same for both). Computed from the dropped terms' closed forms:
+///   M = 4: θ < 6.4e-3,  5: 4.05e-2,  6: 0.127,  7: 0.279  (rounded down below).
+/// Fewer terms and moments make the near-identity case (pose-graph residuals) about half as
+/// expensive. tests/lie checks reduced series against the full one and the closed form.
+inline constexpr double kSim3ThetaSeriesBound[kSim3ThetaSeriesTerms] = {
+    0.0, 0.0, 0.0, 0.0, 6.4e-3, 4.0e-2, 0.125, 0.275};
+
+/// M for θ (see kSim3ThetaSeriesBound): the smallest M ≥ 4 whose bound exceeds θ, else
+/// kSim3ThetaSeriesTerms.
+template <typename Scalar>
+int sim3_theta_series_terms(Scalar theta) {
+  for (int m = 4; m < kSim3ThetaSeriesTerms; ++m)
+    if (theta < Scalar(kSim3ThetaSeriesBound[m])) return m;
+  return kSim3ThetaSeriesTerms;
+}
 
 /// g_k(σ) = ∫₀¹ sᵏ e^{sσ} ds for k = 0..n (n ≤ kSim3MaxMoment), written to g[0..n].
 /// |σ| ≤ kSim3SigmaSeries: power series Σ_j σʲ/(j!(n+j+1)) for g_n, then the downward
@@ -54,11 +100,63 @@ void sigma_moments(Scalar sigma, int n, Scalar* g) {
       if (abs(add) <= std::numeric_limits<Scalar>::epsilon() * Scalar(1e-2) * abs(sum)) break;
     }
     g[n] = sum;
-    for (int k = n; k >= 1; --k) g[k - 1] = (es - sigma * g[k]) / Scalar(k);
+    for (int k = n; k >= 1; --k) g[k - 1] = (es - sigma * g[k]) * Scalar(kInvInteger[k]);
   } else {
-    g[0] = (es - Scalar(1)) / sigma;
-    for (int k = 1; k <= n; ++k) g[k] = (es - Scalar(k) * g[k - 1]) / sigma;
+    const Scalar inv = Scalar(1) / sigma;
+    g[0] = (es - Scalar(1)) * inv;
+    for (int k = 1; k <= n; ++k) g[k] = (es - Scalar(k) * g[k - 1]) * inv;
   }
+}
+
+/// The θ² series of the coefficients (θ < kSim3ThetaSeries) with M terms (4 ≤ M ≤
+/// kSim3ThetaSeriesTerms; sim3_coeffs picks M by sim3_theta_series_terms). Exposed so tests
+/// can compare a reduced M with the full series.
+template <typename Scalar>
+VCoeffs<Scalar> sim3_coeffs_series(Scalar theta, Scalar sigma, int M, bool with_derivatives) {
+  VCoeffs<Scalar> c;
+  Scalar g[kSim3MaxMoment + 1];
+  const int max_moment = 2 * M;
+  sigma_moments(sigma, max_moment, g);
+  c.c0 = g[0];
+  c.c0s = g[1];
+  const Scalar t2 = theta * theta;
+  Scalar c1 = 0, c2 = 0, c1s = 0, c2s = 0, c1t = 0, c2t = 0;
+  // p = (−1)^m θ^{2m}; term m of c1 / c1s: p·g_{2m+1}/(2m+1)!, p·g_{2m+2}/(2m+1)!.
+  Scalar p = Scalar(1);
+  for (int m = 0; m < M; ++m) {
+    const Scalar f1 = Scalar(kInvFactorial[2 * m + 1]);
+    c1 += p * g[2 * m + 1] * f1;
+    c1s += p * g[2 * m + 2] * f1;  // 2m+2 ≤ 2M
+    p *= -t2;
+  }
+  // Terms carrying θ^{2m−2} / θ^{2m−4}: powers are built by multiplication (never divided by
+  // θ), so θ = 0 is exact.
+  Scalar q = Scalar(1);   // (−1)^{m+1} θ^{2m−2} for m = 1
+  Scalar r = Scalar(-1);  // (−1)^{m+1} θ^{2m−4} for m = 2
+  for (int m = 1; m <= M; ++m) {
+    const Scalar f2 = Scalar(kInvFactorial[2 * m]);
+    c2 += q * g[2 * m] * f2;
+    if (2 * m + 1 <= max_moment) {
+      const Scalar f1 = Scalar(kInvFactorial[2 * m + 1]);
+      c2s += q * g[2 * m + 1] * f2;
+      // c1t term m: (−1)^m 2m θ^{2m−2} g_{2m+1}/(2m+1)! = −q·2m·g_{2m+1}·f1.
+      c1t -= q * Scalar(2 * m) * g[2 * m + 1] * f1;
+    }
+    if (m >= 2) {
+      c2t += r * Scalar(2 * m - 2) * g[2 * m] * f2;
+      r *= -t2;
+    }
+    q *= -t2;
+  }
+  c.c1 = c1;
+  c.c2 = c2;
+  if (with_derivatives) {
+    c.c1s = c1s;
+    c.c2s = c2s;
+    c.c1t = c1t;
+    c.c2t = c2t;
+  }
+  return c;
 }
 
 /// Exact coefficients of C(ω, σ) and their derivatives (see the file comment).
@@ -67,58 +165,10 @@ void sigma_moments(Scalar sigma, int n, Scalar* g) {
 ///        log need only c0, c1, c2).
 template <typename Scalar>
 VCoeffs<Scalar> sim3_coeffs(Scalar theta, Scalar sigma, bool with_derivatives) {
+  if (theta < kSim3ThetaSeries<Scalar>)
+    return sim3_coeffs_series(theta, sigma, sim3_theta_series_terms(theta), with_derivatives);
   VCoeffs<Scalar> c;
-  Scalar g[kSim3MaxMoment + 1];
-  if (theta < kSim3ThetaSeries<Scalar>) {
-    sigma_moments(sigma, kSim3MaxMoment, g);
-    c.c0 = g[0];
-    c.c0s = g[1];
-    const Scalar t2 = theta * theta;
-    Scalar c1 = 0, c2 = 0, c1s = 0, c2s = 0, c1t = 0, c2t = 0;
-    // p = (−1)^m θ^{2m}; f1 = 1/(2m+1)!, f2 = 1/(2m)!. Term m of c2 / c2s uses θ^{2m−2}.
-    Scalar p = Scalar(1), f2 = Scalar(1), f1 = Scalar(1);
-    for (int m = 0; m < kSim3ThetaSeriesTerms; ++m) {
-      if (m > 0) {
-        f2 = f1 / Scalar(2 * m);      // 1/(2m)!
-        f1 = f2 / Scalar(2 * m + 1);  // 1/(2m+1)!
-      }
-      c1 += p * g[2 * m + 1] * f1;
-      if (2 * m + 2 <= kSim3MaxMoment) c1s += p * g[2 * m + 2] * f1;
-      p *= -t2;
-    }
-    // Terms carrying θ^{2m−2} / θ^{2m−4}: powers are built by multiplication (never divided by
-    // θ), so θ = 0 is exact.
-    Scalar q = Scalar(1);        // (−1)^{m+1} θ^{2m−2} for m = 1
-    f2 = Scalar(1) / Scalar(2);  // 1/(2m)! at m = 1
-    f1 = Scalar(1) / Scalar(6);  // 1/(2m+1)! at m = 1
-    Scalar r = Scalar(-1);       // (−1)^{m+1} θ^{2m−4} for m = 2
-    for (int m = 1; m <= kSim3ThetaSeriesTerms; ++m) {
-      if (m > 1) {
-        f2 = f1 / Scalar(2 * m);
-        f1 = f2 / Scalar(2 * m + 1);
-      }
-      c2 += q * g[2 * m] * f2;
-      if (2 * m + 1 <= kSim3MaxMoment) {
-        c2s += q * g[2 * m + 1] * f2;
-        // c1t term m: (−1)^m 2m θ^{2m−2} g_{2m+1}/(2m+1)! = −q·2m·g_{2m+1}·f1.
-        c1t -= q * Scalar(2 * m) * g[2 * m + 1] * f1;
-      }
-      if (m >= 2) {
-        c2t += r * Scalar(2 * m - 2) * g[2 * m] * f2;
-        r *= -t2;
-      }
-      q *= -t2;
-    }
-    c.c1 = c1;
-    c.c2 = c2;
-    if (with_derivatives) {
-      c.c1s = c1s;
-      c.c2s = c2s;
-      c.c1t = c1t;
-      c.c2t = c2t;
-    }
-    return c;
-  }
+  Scalar g[2];
   sigma_moments(sigma, 1, g);
   using Complex = std::complex<Scalar>;
   const Complex z(sigma, theta);

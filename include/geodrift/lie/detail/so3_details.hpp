@@ -9,12 +9,11 @@
 /// and the "V matrix" of SE3 (t = V·ν in exp) is the same matrix. Sim3 generalises it to
 /// C(ω, σ) = c0(σ)·I + c1(θ,σ)·W + c2(θ,σ)·W² (sim3_details.hpp).
 
-#include "geodrift/lie/constants.hpp"
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-
 #include <cmath>
+
+#include "geodrift/lie/constants.hpp"
 
 namespace geodrift::lie::detail {
 

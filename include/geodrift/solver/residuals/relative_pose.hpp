@@ -2,8 +2,8 @@
 
 /// @file
 /// Pose-graph residuals on a Lie group (SE3d or Sim3d; any group with log(J*), adjoint(),
-/// inverse(), operator*). All Jacobians are w.r.t. LEFT perturbations X ← exp(δ)·X, in the
-/// group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
+/// inverse(), operator*, times_adjoint()). All Jacobians are w.r.t. LEFT perturbations X ←
+/// exp(δ)·X, in the group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
 
 #include <Eigen/Core>
 
@@ -39,8 +39,8 @@ struct RelativePoseResidual {
     }
     Mat Jl_inv;
     *r = E.log(&Jl_inv);
-    if (J_r_Si) J_r_Si->noalias() = Jl_inv * dS_ij.adjoint();
-    if (J_r_Sj) J_r_Sj->noalias() = -Jl_inv * E.adjoint();
+    if (J_r_Si) *J_r_Si = dS_ij.times_adjoint(Jl_inv);  // Jl⁻¹·Ad(dS_ij)
+    if (J_r_Sj) *J_r_Sj = -E.times_adjoint(Jl_inv);     // −Jl⁻¹·Ad(E)
     return true;
   }
 };
