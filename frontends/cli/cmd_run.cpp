@@ -431,22 +431,23 @@ int run_run(int argc, char** argv) {
     }
     if (!as) throw Error("cannot write " + out.path("attempts.csv"));
     // The uncorrected VO keyframes (M) with their frame index, for a Sim(3)-aligned baseline.
-    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true);
+    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true,
+                               io::kMapUnits);
     geo_written = true;
   }
 #endif
   if (!geo_written) {
-    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note);
-    io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note);
+    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note, false, io::kMapUnits);
+    io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note, io::kMapUnits);
   }
   io::write_trajectory_kitti(out.path("keyframes_kitti.txt"), kf_traj, note,
-                             /*write_frame_index=*/true);
+                             /*write_frame_index=*/true, io::kMapUnits);
   std::filesystem::create_directory(out.path("model"));
-  io::write_colmap_text(out.path("model"), m, note);
+  io::write_colmap_text(out.path("model"), m, note, {}, {}, {}, io::kMapUnits);
   {
     io::PointCloud cloud;
     for (const auto& p : m.points) cloud.points.push_back(p.position);
-    io::write_ply(out.path("points.ply"), cloud, note);
+    io::write_ply(out.path("points.ply"), cloud, note, io::kMapUnits);
   }
   {
     const vo::OdometryTimings& t = odo.timings();
