@@ -127,4 +127,25 @@ TEST_CASE("geotags CLI: a folder of geo-tagged JPEGs without CSV builds from EXI
   CHECK(line.find("10.jpg,-1,,55.69857") != std::string::npos);
   CHECK(line.find(",13.19505") != std::string::npos);
 }
+
+TEST_CASE("run CLI: a --geotags folder of JPEGs none of which has EXIF GPS is refused by name",
+          "[geotag][cli][exif][errors]") {
+  test::TempDir tmp;
+  namespace fs = std::filesystem;
+  fs::create_directories(tmp.path() / "drive");
+  fs::create_directories(tmp.path() / "photos");
+  cv::Mat frame(120, 160, CV_8U);
+  cv::randu(frame, 0, 255);
+  for (const char* f : {"000000.png", "000001.png"})
+    REQUIRE(cv::imwrite((tmp.path() / "drive" / f).string(), frame));
+  test::write_text((tmp.path() / "drive" / "calib.txt").string(), "K: 150 0 80 0 150 60 0 0 1\n");
+  REQUIRE(cv::imwrite((tmp.path() / "photos" / "plain.jpg").string(), frame));
+  const Run r = run("run --images " + tmp.file("drive") + " --geotags " + tmp.file("photos") +
+                    " --out " + tmp.file("out"));
+  INFO(r.output);
+  CHECK(r.code == 1);
+  CHECK(r.output.find("none of its 1 JPEG files is usable") != std::string::npos);
+  CHECK(r.output.find("plain.jpg: no EXIF") != std::string::npos);
+  CHECK(test::no_outputs(tmp.path(), "out"));
+}
 #endif
