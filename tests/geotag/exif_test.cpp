@@ -196,13 +196,15 @@ std::vector<std::size_t> write_ifd(TiffWriter& w, const std::vector<Tag>& tags) 
 }
 
 /// "Exif\0\0" + TIFF: IFD0 (Orientation, GPS and Exif pointers), GPS IFD, Exif IFD.
-std::vector<std::uint8_t> synthetic_app1(bool little, char dir_ref) {
+std::vector<std::uint8_t> synthetic_app1(bool little, char dir_ref, int orientation = 1) {
   TiffWriter w(little);
   w.u8(little ? 'I' : 'M'), w.u8(little ? 'I' : 'M');
   w.u16(42);
   w.u32(8);
   const std::vector<std::size_t> ifd0 =
-      write_ifd(w, {{0x0112, 3, 1, {1}}, {0x8769, 4, 1, {0}}, {0x8825, 4, 1, {0}}});
+      write_ifd(w, {{0x0112, 3, 1, {static_cast<std::uint32_t>(orientation)}},
+                    {0x8769, 4, 1, {0}},
+                    {0x8825, 4, 1, {0}}});
   w.put_u32(ifd0[2], static_cast<std::uint32_t>(w.bytes.size()));
   write_ifd(w, {{0x0000, 1, 4, {2, 3, 0, 0}},
                 {0x0001, 2, 2, {'S', 0}},
@@ -222,9 +224,11 @@ std::vector<std::uint8_t> synthetic_app1(bool little, char dir_ref) {
   return app1;
 }
 
-/// A 64x48 JPEG written by OpenCV with an XMP APP1 and then `app1` spliced after SOI.
-std::vector<std::uint8_t> jpeg_with_app1(const std::vector<std::uint8_t>& app1) {
-  cv::Mat img(48, 64, CV_8UC3);
+/// A 64 x rows JPEG written by OpenCV with `app1` (after an XMP APP1 if xmp_first) spliced
+/// after SOI.
+std::vector<std::uint8_t> jpeg_with_app1(const std::vector<std::uint8_t>& app1, int rows = 48,
+                                         bool xmp_first = true) {
+  cv::Mat img(rows, 64, CV_8UC3);
   cv::randu(img, 0, 255);
   std::vector<std::uint8_t> jpg;
   REQUIRE(cv::imencode(".jpg", img, jpg));
@@ -241,7 +245,10 @@ std::vector<std::uint8_t> jpeg_with_app1(const std::vector<std::uint8_t>& app1) 
   const std::string body = "<x:xmpmeta/>";
   xmp.insert(xmp.end(), body.begin(), body.end());
   std::vector<std::uint8_t> out(jpg.begin(), jpg.begin() + 2);
-  for (const auto& s : {segment(xmp), segment(app1)}) out.insert(out.end(), s.begin(), s.end());
+  for (const auto& s : xmp_first
+                           ? std::vector<std::vector<std::uint8_t>>{segment(xmp), segment(app1)}
+                           : std::vector<std::vector<std::uint8_t>>{segment(app1)})
+    out.insert(out.end(), s.begin(), s.end());
   out.insert(out.end(), jpg.begin() + 2, jpg.end());
   return out;
 }
@@ -525,6 +532,37 @@ TEST_CASE("Geo-tag CSV: empty cells are taken from EXIF; JPEG folders without a 
     CHECK(std::string(e.what()).find("a.jpg: no EXIF") != std::string::npos);
   }
   CHECK(thrown);
+  // EXIF orientation 6 (rotated 90 deg): OpenCV decodes it upright (48 x 64) when the Exif
+  // block is the first APP1 (it reads no other), not behind an XMP APP1; the photo's camera
+  // follows the decoded image either way. A 2:1 JPEG with a true image direction is a panorama.
+  fs::create_directories(tmp.path() / "synthetic");
+  write_bytes((tmp.path() / "synthetic" / "a_rotated.jpg").string(),
+              jpeg_with_app1(synthetic_app1(true, 'T', 6), 48, false));
+  write_bytes((tmp.path() / "synthetic" / "b_rotated_after_xmp.jpg").string(),
+              jpeg_with_app1(synthetic_app1(true, 'T', 6), 48, true));
+  write_bytes((tmp.path() / "synthetic" / "c_pano.jpg").string(),
+              jpeg_with_app1(synthetic_app1(false, 'T'), 32));
+  write_bytes((tmp.path() / "synthetic" / "d_pano_magnetic.jpg").string(),
+              jpeg_with_app1(synthetic_app1(true, 'M'), 32));
+  const auto syn = geotag::read_geotag_sources((tmp.path() / "synthetic").string(), {}, &skipped);
+  REQUIRE(syn.size() == 3);
+  CHECK(syn[0].photo_camera.width == 48);
+  CHECK(syn[0].photo_camera.height == 64);
+  for (int k : {0, 1}) {
+    const cv::Mat decoded = cv::imread(syn[k].path, cv::IMREAD_GRAYSCALE);
+    CHECK(syn[k].kind == geotag::SourceKind::kPhoto);
+    CHECK(syn[k].photo_camera.width == decoded.cols);
+    CHECK(syn[k].photo_camera.height == decoded.rows);
+    CHECK(syn[k].photo_camera.fx == Approx(28.0 * 80.0 / std::hypot(36.0, 24.0)).epsilon(1e-12));
+    CHECK(syn[k].tag.heading == Approx(270.1 * 3.14159265358979323846 / 180).epsilon(1e-14));
+    CHECK(syn[k].tag.height == -123.4);
+  }
+  CHECK(syn[2].kind == geotag::SourceKind::kPanorama);
+  CHECK(syn[2].tag.heading == Approx(270.1 * 3.14159265358979323846 / 180).epsilon(1e-14));
+  REQUIRE(skipped.size() == 1);
+  CHECK(skipped[0].find("d_pano_magnetic.jpg: 2:1 panorama without an EXIF true "
+                        "GPSImgDirection (only a magnetic one)") != std::string::npos);
+
   fs::create_directories(tmp.path() / "empty");
   test::require_io_error([&] { geotag::read_geotag_sources((tmp.path() / "empty").string()); },
                          (tmp.path() / "empty").string());

@@ -98,6 +98,17 @@ bool image_size(const std::string& path, int* w, int* h) {
   return true;
 }
 
+/// Size of the image as OpenCV decodes it: a JPEG whose EXIF orientation is not 1 may be
+/// turned upright (5..8 swap width and height), depending on where its Exif block sits (OpenCV
+/// reads the first APP1 segment only), so such photos are decoded once to know.
+bool decoded_size(const std::string& path, int* w, int* h) {
+  const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  if (img.empty()) return false;
+  *w = img.cols;
+  *h = img.rows;
+  return true;
+}
+
 }  // namespace
 
 std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
@@ -227,10 +238,8 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
                "' needs a heading: heading_deg is empty and the image has no EXIF true "
                "GPSImgDirection" +
                (std::isfinite(exif_of().magnetic_heading_deg) ? " (only a magnetic one)" : ""));
-    if (s.kind == SourceKind::kPhoto) {
-      // OpenCV shows a JPEG upright (EXIF orientation applied): orientations 5..8 transpose it.
-      if (exif_of().orientation >= 5) std::swap(w, h);
-    }
+    if (s.kind == SourceKind::kPhoto && exif_of().orientation > 1 && !decoded_size(s.path, &w, &h))
+      fail(csv_path, lineno, "image '" + s.path + "' cannot be read");
     if (s.kind == SourceKind::kPhoto) {
       map::Camera& c = s.photo_camera;
       c.id = -1;
@@ -331,7 +340,10 @@ std::vector<GeoSource> read_geotag_jpeg_folder(const std::string& dir,
         continue;
       }
     } else {
-      if (x.orientation >= 5) std::swap(w, h);  // shown upright by OpenCV
+      if (x.orientation > 1 && !decoded_size(path, &w, &h)) {
+        skip("cannot be read as an image");
+        continue;
+      }
       map::Camera& c = s.photo_camera;
       c.id = -1;
       c.width = w;

@@ -55,7 +55,8 @@ struct ExifGeotag {
   double pixel_width = kNaN;        ///< PixelXDimension (0xA002)
   double pixel_height = kNaN;       ///< PixelYDimension (0xA003)
   /// TIFF Orientation 1..8 (0: absent or invalid). 5..8 mean the stored pixels are transposed
-  /// (width and height swap when the image is shown upright, as OpenCV's imread does).
+  /// (width and height swap when the image is shown upright; OpenCV's imread does so only when
+  /// this block is the file's first APP1 segment).
   int orientation = 0;
 
   /// Latitude and longitude are both known.

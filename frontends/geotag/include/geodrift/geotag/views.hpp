@@ -26,8 +26,9 @@
 ///   id (optional)                     geo-tag id (default: row number from 0)
 ///   kind (optional)                   "panorama" or "photo"; when absent, a 2:1 image is a
 ///                                     panorama, anything else a photo
-///   fx, fy, cx, cy (optional)         photo intrinsics in pixels of the image shown upright
-///                                     (EXIF orientation applied, as OpenCV decodes it);
+///   fx, fy, cx, cy (optional)         photo intrinsics in pixels of the image as OpenCV
+///                                     decodes it (EXIF orientation applied when OpenCV sees it;
+///                                     such photos are decoded once to get their size);
 ///                                     otherwise from GeoSourceOptions::photo_hfov_deg, else from
 ///                                     the EXIF FocalLengthIn35mmFilm f35: fx = fy = f35 *
 ///                                     (image diagonal in px) / 43.27 mm (the 35 mm-equivalent
