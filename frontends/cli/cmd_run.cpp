@@ -50,9 +50,11 @@ inputs
                       "K: fx 0 cx 0 fy cy 0 0 1" [+ "D: k1 k2 p1 p2 [k3]"], or an OpenCV YAML
                       with camera_matrix/K and distortion_coefficients/D. Default with --images:
                       DIR/calib.txt. Frames are undistorted when the calibration has distortion.
-  --geotags DIR|FILE  geo-tagged panoramas/photos: a folder with geotags.csv (the database is
-                      built first; see `geodrift geotags build --help` for the CSV) or a
-                      database FILE written by `geodrift geotags build`. Each keyframe then
+  --geotags DIR|FILE  geo-tagged panoramas/photos: a folder with geotags.csv or, without it,
+                      of geo-tagged JPEGs (EXIF GPS; the database is built first; see
+                      `geodrift geotags build --help` for the CSV, the EXIF fields used and
+                      the JPEGs skipped with a warning) or a database FILE written by
+                      `geodrift geotags build`. Each keyframe then
                       retrieves its top-5 views (RootSIFT bag of words), matches ORB + K-VLD,
                       localizes them by PnP + LM against its map points, and every localized
                       view is a correspondence for the Corrector (INIT at the 4th, then
@@ -173,9 +175,10 @@ int run_run(int argc, char** argv) {
     std::error_code ec;
     const auto tg = std::chrono::steady_clock::now();
     if (std::filesystem::is_directory(g, ec)) {
-      const std::string csv = (std::filesystem::path(g) / "geotags.csv").string();
-      if (!std::filesystem::exists(csv, ec))
-        throw Error("--geotags '" + g + "' is a folder without geotags.csv");
+      std::vector<std::string> skipped;
+      std::vector<geotag::GeoSource> sources = geotag::read_geotag_sources(g, {}, &skipped);
+      for (const std::string& w : skipped)
+        std::fprintf(stderr, "geodrift run: warning: --geotags: skipped %s\n", w.c_str());
       geotag::Database::BuildOptions bo;
       bo.video_camera = calib.camera;
       if (stderr_is_tty())
@@ -183,8 +186,7 @@ int run_run(int argc, char** argv) {
           std::fprintf(stderr, "\rgeodrift run: geo-tag database %-10s %zu/%zu   ", stage, done,
                        total);
         };
-      geo_db = std::make_unique<geotag::Database>(
-          geotag::Database::build(geotag::read_geotag_csv(csv), bo));
+      geo_db = std::make_unique<geotag::Database>(geotag::Database::build(sources, bo));
       if (stderr_is_tty()) std::fputc('\n', stderr);
     } else {
       geo_db = std::make_unique<geotag::Database>(geotag::Database::load(g));
