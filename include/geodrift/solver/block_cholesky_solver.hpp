@@ -39,6 +39,13 @@
 
 namespace geodrift::solver {
 
+/// LinearSolverType::kAuto (and the Schur path's reduced camera system) use the block Cholesky
+/// when L has at most this many blocks per block column on average. Measured (BENCHMARKS.md): the
+/// block Cholesky is faster than CHOLMOD on the drift graph (7 blocks per column) and on all four
+/// g2o graphs (parking-garage 7, cubicle 15, torus3D 17, sphere2500 21); beyond that CHOLMOD's
+/// dense supernodes (BLAS-3) are expected to win, so larger fill goes to CHOLMOD.
+inline constexpr double kAutoMaxBlocksPerColumn = 24.0;
+
 namespace detail {
 
 /// Symbolic block factor shared by the fixed-size kernels.
@@ -337,6 +344,10 @@ class BlockCholeskySolver final : public LinearSolver {
     if (!factor_) return 0.0;
     const double off = static_cast<double>(sym_.row.size()) - sym_.nb;
     return off * B_ * B_ + static_cast<double>(sym_.nb) * B_ * (B_ + 1) / 2.0;
+  }
+  /// Average number of blocks per block column of L (after analyze(); 0 before).
+  double blocks_per_column() const {
+    return factor_ && sym_.nb > 0 ? static_cast<double>(sym_.row.size()) / sym_.nb : 0.0;
   }
   /// Flops of one numeric factorisation (after analyze()).
   double flops() const { return factor_ ? sym_.flops : 0.0; }
