@@ -223,8 +223,10 @@ struct Summary {
   int num_residuals = 0;
   double factor_nnz = 0.0;
   std::string linear_solver;
-  double time_evaluate = 0.0;  ///< residuals + Jacobians (incl. cost-only trial evaluations) [s]
-  double time_assemble = 0.0;  ///< H += JᵀJ, g += Jᵀr [s]
+  /// Residuals + Jacobians + their accumulation H += J̃ᵀJ̃, g += J̃ᵀr̃ (fused per residual block,
+  /// see LinearizeTimes), incl. cost-only trial evaluations [s].
+  double time_evaluate = 0.0;
+  double time_assemble = 0.0;  ///< zeroing H and g before each linearisation [s]
   double time_analyze = 0.0;   ///< symbolic analysis (0 when reused) [s]
   /// True when this solve() reused the symbolic analysis kept by the LevenbergMarquardt object
   /// from an earlier solve() of the same pattern (the same Problem or another one).
