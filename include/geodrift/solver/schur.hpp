@@ -25,9 +25,10 @@
 /// BLAS call, no per-supernode bookkeeping) when every camera block is 6 or 7 wide and its
 /// factor of S has at most kAutoMaxBlocksPerColumn blocks per column on average (the kAuto rule
 /// of the full-H solvers), otherwise CHOLMOD (the general path: wide cameras with
-/// intrinsics, large dense reduced systems where BLAS-3 supernodes win). Sliding-window BA
-/// (≈ 30 cameras, S nearly dense: ≤ 16 blocks per column) and KITTI 00 (77 cameras, a band)
-/// take the block Cholesky; see BENCHMARKS.md "Round 3" for the measurements.
+/// intrinsics, large dense reduced systems where BLAS-3 supernodes win). The Corrector's
+/// sliding-window BA (≈ 30 cameras, S nearly dense: ≤ 16 blocks per column), KITTI 00 (77
+/// cameras) and the synthetic 500-camera benchmark all take the block Cholesky; see
+/// BENCHMARKS.md "Round 3" for the measurements.
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
