@@ -290,8 +290,10 @@ TEST_CASE("Assembled BA Jacobian and normal equations match numeric ones", "[sol
 }
 
 TEST_CASE("BA: plain sparse, Schur and dense solves reach the same solution", "[solver]") {
-  const LinearSolverType types[] = {LinearSolverType::kCholmod, LinearSolverType::kSchur,
-                                    LinearSolverType::kDense, LinearSolverType::kSchurDense};
+  const LinearSolverType types[] = {
+      LinearSolverType::kCholmod,      LinearSolverType::kSchur,
+      LinearSolverType::kDense,        LinearSolverType::kSchurDense,
+      LinearSolverType::kSchurCholmod, LinearSolverType::kSchurBlockCholesky};
   std::vector<BaScene> scenes;
   std::vector<solver::Summary> sums;
   for (const auto t : types) {
@@ -304,7 +306,10 @@ TEST_CASE("BA: plain sparse, Schur and dense solves reach the same solution", "[
     CHECK(sums.back().converged());
     CHECK(sums.back().final_cost < 0.05 * sums.back().initial_cost);
   }
-  CHECK(sums[1].linear_solver == "schur+cholmod");
+  // 4 free cameras: the reduced camera system is thin, kSchur takes the block Cholesky.
+  CHECK(sums[1].linear_solver == "schur+block-cholesky");
+  CHECK(sums[4].linear_solver == "schur+cholmod");
+  CHECK(sums[5].linear_solver == "schur+block-cholesky");
   const auto rel = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
     return (a - b).norm() / (1.0 + b.norm());
   };
@@ -322,6 +327,65 @@ TEST_CASE("BA: plain sparse, Schur and dense solves reach the same solution", "[
     for (std::size_t j = 0; j < scenes[0].points.size(); ++j)
       CHECK(rel(scenes[k].points[j], scenes[0].points[j]) < 1e-8);
   }
+}
+
+TEST_CASE("Schur: the block-Cholesky reduced camera system equals the CHOLMOD one",
+          "[solver][block_cholesky]") {
+  // 24 free cameras, every point seen by 3 of 4 cameras: S is dense (12.5 blocks per column
+  // of L), the block Cholesky's domain; the same damped H through both reduced solvers and a
+  // dense solve of the whole H.
+  BaScene scene(26, 150, 61);
+  Problem p;
+  scene.build(&p, RobustLoss::huber(1.0));
+  p.finalize(/*schur_ordering=*/true);
+  solver::BlockSparseMatrix H(&p.structure());
+  Eigen::VectorXd g(p.num_effective_parameters());
+  double cost = 0.0;
+  solver::LinearizeTimes t;
+  REQUIRE(p.linearize(&H, g.data(), &cost, &t));
+  for (int c = 0; c < p.num_effective_parameters(); ++c)
+    H.values()[p.structure().diagonal_positions()[c]] *= 1.0 + 1e-4;
+  using RS = solver::SchurSolver::ReducedSolver;
+  solver::SchurSolver sc(RS::kCholmod), sb(RS::kBlockCholesky), sa(RS::kAuto);
+  Eigen::VectorXd xc(g.size()), xb(g.size()), xa(g.size());
+  for (auto* s : {&sc, &sb, &sa}) {
+    REQUIRE(s->analyze(p.structure()) == solver::LinearSolverStatus::kSuccess);
+    REQUIRE(s->factorize(H) == solver::LinearSolverStatus::kSuccess);
+  }
+  CHECK(sc.name() == "schur+cholmod");
+  CHECK(sb.name() == "schur+block-cholesky");
+  CHECK(sa.name() == "schur+block-cholesky");
+  CHECK(sc.reduced_structure().num_blocks() == 24);
+  // Same elimination: identical reduced matrices.
+  CHECK(sb.reduced_matrix().to_dense() == sc.reduced_matrix().to_dense());
+  REQUIRE(sc.solve(g.data(), xc.data()) == solver::LinearSolverStatus::kSuccess);
+  REQUIRE(sb.solve(g.data(), xb.data()) == solver::LinearSolverStatus::kSuccess);
+  REQUIRE(sa.solve(g.data(), xa.data()) == solver::LinearSolverStatus::kSuccess);
+  const Eigen::VectorXd xd = H.to_dense().ldlt().solve(g);
+  INFO("|xb - xc| / |xc| = " << (xb - xc).norm() / xc.norm());
+  CHECK((xb - xc).norm() <= 1e-11 * xc.norm());
+  CHECK((xa - xb).norm() == 0.0);
+  CHECK((xb - xd).norm() <= 1e-9 * xd.norm());
+
+  // A point block that is not positive definite is a status through either reduced solver.
+  const solver::BlockStructure& s = p.structure();
+  const int last = s.num_blocks() - 1;
+  H.values()[s.block_offsets()[s.block_col_ptr()[last + 1] - 1]] = -1.0;
+  CHECK(sb.factorize(H) == solver::LinearSolverStatus::kNotPositiveDefinite);
+  CHECK(sc.factorize(H) == solver::LinearSolverStatus::kNotPositiveDefinite);
+  CHECK_THAT(sb.message(), Catch::Contains("point block"));
+}
+
+TEST_CASE("Schur kAuto: CHOLMOD for a dense reduced system beyond the block Cholesky's range",
+          "[solver]") {
+  // 62 free cameras all sharing points: S is dense with 31.5 blocks per column > 24.
+  BaScene scene(64, 40, 71);
+  Problem p;
+  scene.build(&p, RobustLoss());
+  p.finalize(/*schur_ordering=*/true);
+  solver::SchurSolver sa(solver::SchurSolver::ReducedSolver::kAuto);
+  REQUIRE(sa.analyze(p.structure()) == solver::LinearSolverStatus::kSuccess);
+  CHECK(sa.name() == "schur+cholmod");
 }
 
 TEST_CASE("BA with raw double[3] points (Euclidean<3>) matches Eigen points", "[solver]") {

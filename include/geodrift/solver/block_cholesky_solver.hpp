@@ -39,6 +39,13 @@
 
 namespace geodrift::solver {
 
+/// LinearSolverType::kAuto (and the Schur path's reduced camera system) use the block Cholesky
+/// when L has at most this many blocks per block column on average. Measured (BENCHMARKS.md): the
+/// block Cholesky is faster than CHOLMOD on the drift graph (7 blocks per column) and on all four
+/// g2o graphs (parking-garage 7, cubicle 15, torus3D 17, sphere2500 21); beyond that CHOLMOD's
+/// dense supernodes (BLAS-3) are expected to win, so larger fill goes to CHOLMOD.
+inline constexpr double kAutoMaxBlocksPerColumn = 24.0;
+
 namespace detail {
 
 /// Symbolic block factor shared by the fixed-size kernels.
@@ -51,7 +58,12 @@ struct BlockSymbolic {
   std::vector<int> src_slot;   ///< per stored H block (BlockStructure order): its slot in L
   std::vector<char> src_tr;    ///< ... and whether it is stored transposed there
   std::vector<char> src_diag;  ///< ... and whether it is a diagonal block
-  double flops = 0.0;          ///< factorisation flops (B×B GEMM = 2B³)
+  /// H blocks landing in L's block column j: src_list[src_ptr[j] .. src_ptr[j+1]) (indices
+  /// into the BlockStructure order), so factorize() loads each column just before using it.
+  std::vector<int> src_ptr, src_list;
+  std::vector<int> src_stride;  ///< per stored H block: its outer stride (column height)
+  std::vector<char> fill_slot;  ///< per slot of L: 1 if no block of H lands there (fill-in)
+  double flops = 0.0;           ///< factorisation flops (B×B GEMM = 2B³)
 
   /// L's column structure for ordering `perm` of the block graph given as symmetric lower
   /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry.
@@ -133,6 +145,21 @@ struct BlockSymbolic {
         // H_ab has a's rows; L(i, j) has block i's rows: transposed when a is the column.
         out->src_tr[k] = ia < ib;
       }
+    out->fill_slot.assign(out->row.size(), 1);
+    for (std::size_t k = 0; k < nh; ++k) out->fill_slot[out->src_slot[k]] = 0;
+    out->src_stride.assign(nh, 0);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) out->src_stride[k] = s.column_height(b);
+    out->src_ptr.assign(static_cast<std::size_t>(nb) + 1, 0);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        ++out->src_ptr[std::min(out->inv[brow[k]], out->inv[b]) + 1];
+    for (int j = 0; j < nb; ++j) out->src_ptr[j + 1] += out->src_ptr[j];
+    out->src_list.resize(nh);
+    std::vector<int> next(out->src_ptr.begin(), out->src_ptr.end() - 1);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        out->src_list[next[std::min(out->inv[brow[k]], out->inv[b])]++] = k;
     return cost;
   }
 };
@@ -169,14 +196,20 @@ class BlockFactor final : public BlockFactorBase {
     const int nb = S.nb;
     const int* cp = S.col_ptr.data();
     const int* rw = S.row.data();
-    // Load H into L's slots (L is zero outside the pattern of H).
-    for (auto& m : L_) m.setZero();
-    const auto& bcp = s.block_col_ptr();
+    // One pass over L: column j is zeroed and loaded from H just before its updates (it is
+    // still in cache when the updates and the diagonal solve touch it).
     const auto& boff = s.block_offsets();
-    for (int b = 0; b < nb; ++b) {
-      const int h = s.column_height(b);
-      for (int k = bcp[b]; k < bcp[b + 1]; ++k) {
-        const ConstMap A(values + boff[k], B, B, Eigen::OuterStride<>(h));
+    const int* sp = S.src_ptr.data();
+    const int* sl = S.src_list.data();
+    std::fill(head_.begin(), head_.end(), -1);
+    for (int j = 0; j < nb; ++j) {
+      for (int p = cp[j]; p < cp[j + 1]; ++p) {
+        slot_of_row_[rw[p]] = p;
+        if (S.fill_slot[p]) L_[p].setZero();
+      }
+      for (int t = sp[j]; t < sp[j + 1]; ++t) {
+        const int k = sl[t];
+        const ConstMap A(values + boff[k], B, B, Eigen::OuterStride<>(S.src_stride[k]));
         Mat& dst = L_[static_cast<std::size_t>(S.src_slot[k])];
         if (S.src_diag[k])
           dst = A.template selfadjointView<Eigen::Upper>();
@@ -185,10 +218,6 @@ class BlockFactor final : public BlockFactorBase {
         else
           dst = A;
       }
-    }
-    std::fill(head_.begin(), head_.end(), -1);
-    for (int j = 0; j < nb; ++j) {
-      for (int p = cp[j]; p < cp[j + 1]; ++p) slot_of_row_[rw[p]] = p;
       // Updates from every column k with L_jk ≠ 0 (k < j).
       for (int k = head_[j]; k >= 0;) {
         const int nk = next_[k];
@@ -337,6 +366,10 @@ class BlockCholeskySolver final : public LinearSolver {
     if (!factor_) return 0.0;
     const double off = static_cast<double>(sym_.row.size()) - sym_.nb;
     return off * B_ * B_ + static_cast<double>(sym_.nb) * B_ * (B_ + 1) / 2.0;
+  }
+  /// Average number of blocks per block column of L (after analyze(); 0 before).
+  double blocks_per_column() const {
+    return factor_ && sym_.nb > 0 ? static_cast<double>(sym_.row.size()) / sym_.nb : 0.0;
   }
   /// Flops of one numeric factorisation (after analyze()).
   double flops() const { return factor_ ? sym_.flops : 0.0; }

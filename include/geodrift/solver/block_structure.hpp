@@ -71,20 +71,25 @@ class BlockStructure {
                      "coupling (" << c.first << ", " << c.second << ") outside [0, " << nb << ")");
       if (c.first > c.second) std::swap(c.first, c.second);
     }
-    for (int b = 0; b < nb; ++b) couplings.emplace_back(b, b);
-    std::sort(couplings.begin(), couplings.end(), [](const auto& x, const auto& y) {
-      return x.second != y.second ? x.second < y.second : x.first < y.first;
-    });
-    couplings.erase(std::unique(couplings.begin(), couplings.end()), couplings.end());
-
+    // Bucket the row blocks by column (counting sort), then sort and deduplicate each column's
+    // short list: O(couplings + Σ r log r) instead of one global pair sort (BA windows build a
+    // fresh pattern per window, this is part of their per-window cost).
+    std::vector<int> cnt(nb + 1, 0);
+    for (const auto& c : couplings) ++cnt[c.second + 1];
+    for (int b = 0; b < nb; ++b) cnt[b + 1] += cnt[b] + 1;  // + the diagonal block
+    std::vector<int> rows(static_cast<std::size_t>(cnt[nb]));
+    std::vector<int> fill(cnt.begin(), cnt.end() - 1);
+    for (int b = 0; b < nb; ++b) rows[fill[b]++] = b;
+    for (const auto& c : couplings) rows[fill[c.second]++] = c.first;
     bcol_ptr_.assign(nb + 1, 0);
     brow_.clear();
-    brow_.reserve(couplings.size());
-    for (const auto& c : couplings) {
-      brow_.push_back(c.first);
-      ++bcol_ptr_[c.second + 1];
+    brow_.reserve(rows.size());
+    for (int b = 0; b < nb; ++b) {
+      const auto first = rows.begin() + cnt[b], last = rows.begin() + cnt[b + 1];
+      std::sort(first, last);
+      brow_.insert(brow_.end(), first, std::unique(first, last));
+      bcol_ptr_[b + 1] = static_cast<int>(brow_.size());
     }
-    for (int b = 0; b < nb; ++b) bcol_ptr_[b + 1] += bcol_ptr_[b];
 
     // Scalar CSC.
     height_.assign(nb, 0);

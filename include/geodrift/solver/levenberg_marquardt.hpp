@@ -48,23 +48,24 @@
 
 namespace geodrift::solver {
 
-/// LinearSolverType::kAuto uses the block Cholesky when L has at most this many blocks per block
-/// column on average. Measured (BENCHMARKS.md): the block Cholesky is faster than CHOLMOD on the
-/// drift graph (7 blocks per column) and on all four g2o graphs (parking-garage 7, cubicle 15,
-/// torus3D 17, sphere2500 21); beyond that CHOLMOD's dense supernodes (BLAS-3) are expected to
-/// win, so larger fill goes to CHOLMOD.
-inline constexpr double kAutoMaxBlocksPerColumn = 24.0;
-
 /// Which linear solver LM uses for the damped normal equations.
 enum class LinearSolverType {
-  kCholmod,     ///< CHOLMOD supernodal Cholesky on the full H (general)
-  kSchur,       ///< eliminate R^3 point blocks, CHOLMOD on the reduced camera system (BA)
+  kCholmod,  ///< CHOLMOD supernodal Cholesky on the full H (general)
+  /// Eliminate R^3 point blocks (BA); the reduced camera system goes to the block Cholesky
+  /// when its cameras are 6/7 wide and its factor is thin (≤ kAutoMaxBlocksPerColumn blocks per
+  /// column), otherwise to CHOLMOD (SchurSolver::ReducedSolver::kAuto, schur.hpp).
+  kSchur,
   kDense,       ///< dense LLᵀ of H (tests, tiny problems)
   kSchurDense,  ///< Schur elimination, dense LLᵀ of the reduced camera system (tiny BA)
   /// Block sparse Cholesky with fixed-size 6×6 / 7×7 kernels (block_cholesky_solver.hpp);
   /// needs every free block of size 6 or 7 (SE(3) / Sim(3) pose graphs), else the solve stops
   /// with kInvalidProblem.
   kBlockCholesky,
+  /// kSchur with CHOLMOD on the reduced camera system, whatever its shape.
+  kSchurCholmod,
+  /// kSchur with the block Cholesky on the reduced camera system (cameras of size 6 or 7,
+  /// else the solve stops with kLinearSolverFailure).
+  kSchurBlockCholesky,
   /// kBlockCholesky when every free block has size 6 or 7 and its factor is thin (chain-like
   /// graphs: at most kAutoMaxBlocksPerColumn blocks per column of L on average), otherwise
   /// kCholmod. Decided at each symbolic analysis.
@@ -222,8 +223,10 @@ struct Summary {
   int num_residuals = 0;
   double factor_nnz = 0.0;
   std::string linear_solver;
-  double time_evaluate = 0.0;  ///< residuals + Jacobians (incl. cost-only trial evaluations) [s]
-  double time_assemble = 0.0;  ///< H += JᵀJ, g += Jᵀr [s]
+  /// Residuals + Jacobians + their accumulation H += J̃ᵀJ̃, g += J̃ᵀr̃ (fused per residual block,
+  /// see LinearizeTimes), incl. cost-only trial evaluations [s].
+  double time_evaluate = 0.0;
+  double time_assemble = 0.0;  ///< zeroing H and g before each linearisation [s]
   double time_analyze = 0.0;   ///< symbolic analysis (0 when reused) [s]
   /// True when this solve() reused the symbolic analysis kept by the LevenbergMarquardt object
   /// from an earlier solve() of the same pattern (the same Problem or another one).
@@ -323,7 +326,9 @@ class LevenbergMarquardt {
     if (!options_.validate(&why)) return finish(Termination::kInvalidOptions, why);
 
     const bool schur = options_.linear_solver == LinearSolverType::kSchur ||
-                       options_.linear_solver == LinearSolverType::kSchurDense;
+                       options_.linear_solver == LinearSolverType::kSchurDense ||
+                       options_.linear_solver == LinearSolverType::kSchurCholmod ||
+                       options_.linear_solver == LinearSolverType::kSchurBlockCholesky;
     problem->set_num_threads(options_.num_threads);
     if (!problem->is_finalized() || problem->has_schur_ordering() != schur)
       problem->finalize(schur);
@@ -339,7 +344,6 @@ class LevenbergMarquardt {
       solver_ = make_solver(resolve(options_.linear_solver, s));
       analyzed_ = false;
     }
-    sum.linear_solver = solver_->name();
     sum.analysis_reused = analyzed_ && s.same_pattern(pattern_);
     if (!sum.analysis_reused) {
       const auto t0 = Clock::now();
@@ -357,6 +361,7 @@ class LevenbergMarquardt {
       pattern_ = s.pattern();
       analyzed_ = true;
     }
+    sum.linear_solver = solver_->name();  // after analyze(): kSchur picks its reduced solver there
 
     // Buffers (sized once).
     H_.reset(&s);
@@ -547,7 +552,11 @@ class LevenbergMarquardt {
       case LinearSolverType::kCholmod:
         return std::make_unique<CholmodSolver>();
       case LinearSolverType::kSchur:
-        return std::make_unique<SchurSolver>(std::make_unique<CholmodSolver>());
+        return std::make_unique<SchurSolver>(SchurSolver::ReducedSolver::kAuto);
+      case LinearSolverType::kSchurCholmod:
+        return std::make_unique<SchurSolver>(SchurSolver::ReducedSolver::kCholmod);
+      case LinearSolverType::kSchurBlockCholesky:
+        return std::make_unique<SchurSolver>(SchurSolver::ReducedSolver::kBlockCholesky);
       case LinearSolverType::kDense:
         return std::make_unique<DenseSolver>();
       case LinearSolverType::kSchurDense:

@@ -71,9 +71,12 @@ struct EvaluationError {
 };
 
 /// Time split of one linearisation (seconds).
+/// Evaluation and accumulation are fused (each residual block's J̃ᵀJ̃ and J̃ᵀr̃ are added to H and
+/// g right after its evaluation, no Jacobian storage), so `evaluate` covers both; `assemble` is
+/// the rest of the assembly: zeroing H and g before the pass.
 struct LinearizeTimes {
-  double evaluate = 0.0;  ///< residuals + Jacobians (+ weights, loss)
-  double assemble = 0.0;  ///< H += JᵀJ, g += Jᵀr
+  double evaluate = 0.0;  ///< residuals + Jacobians (+ weights, loss) + H += J̃ᵀJ̃, g += J̃ᵀr̃
+  double assemble = 0.0;  ///< zeroing H and g
 };
 
 namespace detail {
@@ -244,12 +247,6 @@ class ResidualContainer final : public ResidualContainerBase {
   using Residual = typename Block::Residual;
   using Jacobians = typename Block::Jacobians;
   using SqrtInfo = typename Block::SqrtInformation;
-  /// Residuals evaluated before their batch is accumulated (scratch ≤ ~24 KiB on the stack).
-  static constexpr int kChunk = static_cast<int>(std::clamp<std::size_t>(
-      24576 / (sizeof(typename ResidualBlock<Functor, Params...>::Residual) +
-               sizeof(typename ResidualBlock<Functor, Params...>::Jacobians)),
-      1, 32));
-
   std::vector<Block> blocks;
   std::vector<SqrtInfo> sqrt_infos;
   std::vector<std::array<int, sizeof...(Params)>> param_ids;
@@ -302,28 +299,27 @@ class ResidualContainer final : public ResidualContainerBase {
   bool linearize(const int* idx, int count, double* H, double* g, double* cost, int* failed,
                  LinearizeTimes* times) const override {
     using Clock = std::chrono::steady_clock;
-    Residual r[kChunk];
-    Jacobians J[kChunk];
+    // Fused: each block's weighted, corrected Jacobians go straight into its H blocks and g
+    // (one block's J̃ lives on the stack while it is accumulated; no batch of Jacobians).
+    Residual r;
+    Jacobians J;
     double c = 0.0;
-    for (int k0 = 0; k0 < count; k0 += kChunk) {
-      const int k1 = std::min(count, k0 + kChunk);
-      const auto t0 = Clock::now();
-      for (int k = k0; k < k1; ++k) {
-        double ck;
-        if (!blocks[idx[k]].evaluate(sqrt_infos.data(), &ck, &r[k - k0], &J[k - k0])) {
-          *failed = idx[k];
-          return false;
-        }
-        c += ck;
+    const auto t0 = Clock::now();
+    bool ok = true;
+    for (int k = 0; k < count; ++k) {
+      const Block& b = blocks[idx[k]];
+      double ck;
+      if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J)) {
+        *failed = idx[k];
+        ok = false;
+        break;
       }
-      const auto t1 = Clock::now();
-      for (int k = k0; k < k1; ++k) blocks[idx[k]].accumulate(r[k - k0], J[k - k0], H, g);
-      const auto t2 = Clock::now();
-      times->evaluate += std::chrono::duration<double>(t1 - t0).count();
-      times->assemble += std::chrono::duration<double>(t2 - t1).count();
+      c += ck;
+      b.accumulate(r, J, H, g);
     }
-    *cost += c;
-    return true;
+    times->evaluate += std::chrono::duration<double>(Clock::now() - t0).count();
+    if (ok) *cost += c;
+    return ok;
   }
 
   void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo, int* hi) const override {
@@ -642,8 +638,10 @@ class Problem {
   bool linearize(BlockSparseMatrix* H, double* g, double* cost, LinearizeTimes* times,
                  EvaluationError* error = nullptr) const {
     GEODRIFT_CHECK(finalized_, "Problem::linearize() before finalize()");
+    const auto tz = std::chrono::steady_clock::now();
     H->set_zero();
     std::fill(g, g + structure_->num_cols(), 0.0);
+    times->assemble += std::chrono::duration<double>(std::chrono::steady_clock::now() - tz).count();
     *cost = 0.0;
     struct Ctx {
       const Problem* p;
