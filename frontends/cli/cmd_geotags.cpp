@@ -26,8 +26,8 @@ const char* kGeotagsHelp =
     R"(usage: geodrift geotags build --geotags DIR|CSV --out FILE [options]
        geodrift geotags query --db FILE --image IMAGE [options]
 
-build: reads geo-tagged images (a geo-tag CSV, or a dataset folder holding geotags.csv, e.g. the
-output of `geodrift render`), cuts every equirectangular panorama into 8 rectilinear views at
+build: reads geo-tagged images (a geo-tag CSV, a dataset folder holding geotags.csv, e.g. the
+output of `geodrift render`, or a folder of geo-tagged JPEG photos), cuts every equirectangular panorama into 8 rectilinear views at
 45 deg steps with the video camera's intrinsics, extracts RootSIFT (retrieval) and ORB
 (matching) features of every view, trains a hierarchical k-means vocabulary on a subsample,
 builds the tf-idf inverted file and writes everything to one database FILE. Images are not
@@ -37,15 +37,26 @@ Geo-tag CSV columns (header row, any order): file, latitude, longitude, height, 
 [, id, kind (panorama|photo), fx, fy, cx, cy, frame]; aliases image, latitude_deg,
 longitude_deg, altitude_m, true_heading_deg. A 2:1 image is a panorama unless `kind` says
 otherwise; heading_deg is the true heading of the panorama's centre column or of the photo's
-optical axis.
+optical axis. An empty latitude, longitude, height or heading_deg cell is read from the image's
+EXIF (GPSLatitude, GPSLongitude, GPSAltitude as given, true GPSImgDirection); a photo may have
+no heading (unknown: not used to localize), a panorama may not. A photo without fx..cy and
+without --photo-hfov-deg takes its focal from EXIF FocalLengthIn35mmFilm f35: fx = fy =
+f35 * (image diagonal in px) / 43.27 mm, principal point at the centre.
+
+A folder without geotags.csv: every *.jpg/*.jpeg with EXIF GPS latitude, longitude and altitude
+is a source (photo; a 2:1 image is a panorama and needs an EXIF true heading), with the focal
+as above. Files that cannot be used (no GPS, no focal, ...) are skipped, each named in a warning
+on stderr; none usable is an error.
 
 build options
-  --geotags DIR|CSV  geo-tag CSV, or a folder with geotags.csv (and calib.txt, image_0/)
+  --geotags DIR|CSV  geo-tag CSV, a folder with geotags.csv (and calib.txt, image_0/), or a
+                     folder of geo-tagged JPEGs
   --out FILE         database file to write (refused if it exists, unless --force)
   --calib FILE       KITTI calib.txt (P0 gives fx, fy, cx, cy); default DIR/calib.txt
   --size WxH         video image size; default: the size of DIR/image_0/000000.png
   --camera fx,fy,cx,cy,W,H   video camera given directly instead of --calib/--size
-  --photo-hfov-deg D horizontal field of view of photos without fx..cy columns
+  --photo-hfov-deg D horizontal field of view of photos without fx..cy columns (default: from
+                     EXIF FocalLengthIn35mmFilm)
   --sift N           RootSIFT features per view (default 1000)
   --orb N            ORB features per view (default 2000)
   --branching B      vocabulary tree branching (default 10)
@@ -55,7 +66,7 @@ build options
   --force            overwrite an existing FILE
 
 query: prints the top-k views for an image as CSV on stdout (rank, view, score, source file,
-cut direction, view heading, geo-tag).
+cut direction (-1: photo), view heading (empty: unknown), geo-tag).
 
 query options
   --db FILE          database written by `geodrift geotags build`
@@ -132,9 +143,6 @@ int run_build(int argc, char** argv) {
                 "' does not exist");
   const bool is_dir = fs::is_directory(in, ec);
   if (!fs::exists(in, ec)) throw Error("--geotags '" + in + "' does not exist");
-  const std::string csv = is_dir ? (fs::path(in) / "geotags.csv").string() : in;
-  if (is_dir && !fs::exists(csv, ec))
-    throw Error("--geotags '" + in + "' is a folder without geotags.csv");
 
   map::Camera cam;
   if (args.has("camera")) {
@@ -175,7 +183,10 @@ int run_build(int argc, char** argv) {
   if (args.has("photo-hfov-deg"))
     so.photo_hfov_deg = parse_number_list("photo-hfov-deg", args.get("photo-hfov-deg")).at(0);
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<geotag::GeoSource> sources = geotag::read_geotag_csv(csv, so);
+  std::vector<std::string> skipped;
+  const std::vector<geotag::GeoSource> sources = geotag::read_geotag_sources(in, so, &skipped);
+  for (const std::string& w : skipped)
+    std::fprintf(stderr, "geodrift geotags build: warning: skipped %s\n", w.c_str());
 
   geotag::Database::BuildOptions o;
   o.video_camera = cam;
@@ -206,9 +217,10 @@ int run_build(int argc, char** argv) {
   for (const auto& s : sources) panos += s.kind == geotag::SourceKind::kPanorama ? 1 : 0;
   std::printf(
       "geotag database %s: %zu sources (%d panoramas, %zu photos), %zu views, %d words, "
-      "built in %s\n",
+      "built in %s%s\n",
       out.c_str(), sources.size(), panos, sources.size() - panos, db.views().size(),
-      db.vocabulary().num_words(), fmt_time(el).c_str());
+      db.vocabulary().num_words(), fmt_time(el).c_str(),
+      skipped.empty() ? "" : ("; " + std::to_string(skipped.size()) + " JPEGs skipped").c_str());
   return 0;
 }
 
@@ -241,9 +253,12 @@ int run_query(int argc, char** argv) {
   std::printf("rank,view,score,file,direction,heading_deg,latitude,longitude,height\n");
   for (std::size_t i = 0; i < r.size(); ++i) {
     const geotag::GeoView& v = db.views()[r[i].view];
-    std::printf("%zu,%d,%.4f,%s,%d,%.3f,%.8f,%.8f,%.3f\n", i + 1, v.id, r[i].score,
-                db.sources()[v.source].path.c_str(), v.direction, v.heading * 180.0 / kPi,
-                v.tag.latitude_deg, v.tag.longitude_deg, v.tag.height);
+    char heading[32] = "";  // empty: unknown (a photo without heading)
+    if (std::isfinite(v.heading))
+      std::snprintf(heading, sizeof heading, "%.3f", v.heading * 180.0 / kPi);
+    std::printf("%zu,%d,%.4f,%s,%d,%s,%.8f,%.8f,%.3f\n", i + 1, v.id, r[i].score,
+                db.sources()[v.source].path.c_str(), v.direction, heading, v.tag.latitude_deg,
+                v.tag.longitude_deg, v.tag.height);
   }
   if (r.empty()) std::fprintf(stderr, "geodrift geotags query: no view shares a visual word\n");
   return 0;

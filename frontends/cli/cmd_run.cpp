@@ -50,9 +50,11 @@ inputs
                       "K: fx 0 cx 0 fy cy 0 0 1" [+ "D: k1 k2 p1 p2 [k3]"], or an OpenCV YAML
                       with camera_matrix/K and distortion_coefficients/D. Default with --images:
                       DIR/calib.txt. Frames are undistorted when the calibration has distortion.
-  --geotags DIR|FILE  geo-tagged panoramas/photos: a folder with geotags.csv (the database is
-                      built first; see `geodrift geotags build --help` for the CSV) or a
-                      database FILE written by `geodrift geotags build`. Each keyframe then
+  --geotags DIR|FILE  geo-tagged panoramas/photos: a folder with geotags.csv or, without it,
+                      of geo-tagged JPEGs (EXIF GPS; the database is built first; see
+                      `geodrift geotags build --help` for the CSV, the EXIF fields used and
+                      the JPEGs skipped with a warning) or a database FILE written by
+                      `geodrift geotags build`. Each keyframe then
                       retrieves its top-5 views (RootSIFT bag of words), matches ORB + K-VLD,
                       localizes them by PnP + LM against its map points, and every localized
                       view is a correspondence for the Corrector (INIT at the 4th, then
@@ -173,9 +175,10 @@ int run_run(int argc, char** argv) {
     std::error_code ec;
     const auto tg = std::chrono::steady_clock::now();
     if (std::filesystem::is_directory(g, ec)) {
-      const std::string csv = (std::filesystem::path(g) / "geotags.csv").string();
-      if (!std::filesystem::exists(csv, ec))
-        throw Error("--geotags '" + g + "' is a folder without geotags.csv");
+      std::vector<std::string> skipped;
+      std::vector<geotag::GeoSource> sources = geotag::read_geotag_sources(g, {}, &skipped);
+      for (const std::string& w : skipped)
+        std::fprintf(stderr, "geodrift run: warning: --geotags: skipped %s\n", w.c_str());
       geotag::Database::BuildOptions bo;
       bo.video_camera = calib.camera;
       if (stderr_is_tty())
@@ -183,8 +186,7 @@ int run_run(int argc, char** argv) {
           std::fprintf(stderr, "\rgeodrift run: geo-tag database %-10s %zu/%zu   ", stage, done,
                        total);
         };
-      geo_db = std::make_unique<geotag::Database>(
-          geotag::Database::build(geotag::read_geotag_csv(csv), bo));
+      geo_db = std::make_unique<geotag::Database>(geotag::Database::build(sources, bo));
       if (stderr_is_tty()) std::fputc('\n', stderr);
     } else {
       geo_db = std::make_unique<geotag::Database>(geotag::Database::load(g));
@@ -431,22 +433,23 @@ int run_run(int argc, char** argv) {
     }
     if (!as) throw Error("cannot write " + out.path("attempts.csv"));
     // The uncorrected VO keyframes (M) with their frame index, for a Sim(3)-aligned baseline.
-    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true);
+    io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true,
+                               io::kMapUnits);
     geo_written = true;
   }
 #endif
   if (!geo_written) {
-    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note);
-    io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note);
+    io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, note, false, io::kMapUnits);
+    io::write_trajectory_tum(out.path("trajectory_tum.txt"), traj, note, io::kMapUnits);
   }
   io::write_trajectory_kitti(out.path("keyframes_kitti.txt"), kf_traj, note,
-                             /*write_frame_index=*/true);
+                             /*write_frame_index=*/true, io::kMapUnits);
   std::filesystem::create_directory(out.path("model"));
-  io::write_colmap_text(out.path("model"), m, note);
+  io::write_colmap_text(out.path("model"), m, note, {}, {}, {}, io::kMapUnits);
   {
     io::PointCloud cloud;
     for (const auto& p : m.points) cloud.points.push_back(p.position);
-    io::write_ply(out.path("points.ply"), cloud, note);
+    io::write_ply(out.path("points.ply"), cloud, note, io::kMapUnits);
   }
   {
     const vo::OdometryTimings& t = odo.timings();

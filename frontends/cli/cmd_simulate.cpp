@@ -110,8 +110,8 @@ int run_simulate(int argc, char** argv) {
   GEODRIFT_CHECK(s.map.keyframes.size() >= 2,
                  "the simulation produced " << s.map.keyframes.size() << " keyframes");
   const geo::LocalFrame frame = geo::kitti_local_frame();
-  const std::string m_note = "M = simulated monocular SLAM map of KITTI " + seq +
-                             " (arbitrary, drifting scale: units are M units, not metres)";
+  const std::string m_note =
+      "M = simulated monocular SLAM map of KITTI " + seq + " (arbitrary, drifting scale)";
 
   // Drifted keyframe trajectory, camera-to-map, with the frame index.
   io::Trajectory traj;
@@ -122,9 +122,9 @@ int run_simulate(int argc, char** argv) {
     p.T_cw = k.T_cw;
     traj.poses.push_back(p);
   }
-  io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, m_note, true);
+  io::write_trajectory_kitti(out.path("trajectory_kitti.txt"), traj, m_note, true, io::kMapUnits);
   std::filesystem::create_directory(out.path("colmap"));
-  io::write_colmap_text(out.path("colmap"), s.map, m_note);
+  io::write_colmap_text(out.path("colmap"), s.map, m_note, {}, {}, {}, io::kMapUnits);
 
   // Anchors: GNSS-style fixes at the keyframe nearest each protocol anchor frame.
   std::vector<int> frames = sim::kitti_anchor_frames(last - first, static_cast<int>(interval));

@@ -13,53 +13,15 @@
 #include <string>
 #include <vector>
 
+#include "support/cli_run.hpp"
+#include "support/test_files.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int code = -1;
-  std::string output;  // stdout + stderr
-};
-
-Run run(const std::string& args) {
-  const std::string cmd = std::string("'") + GEODRIFT_CLI_EXE + "' " + args + " 2>&1";
-  Run r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  REQUIRE(p != nullptr);
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-struct TempDir {
-  fs::path dir;
-  TempDir() {
-    dir = fs::temp_directory_path() / ("geodrift_cli_test_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir, ec);
-  }
-  std::string path(const std::string& name) const { return (dir / name).string(); }
-  std::string write(const std::string& name, const std::string& text) const {
-    std::ofstream(path(name)) << text;
-    return path(name);
-  }
-};
-
-/// No leftovers of a failed run: neither --out nor a staging folder beside it.
-bool no_outputs(const TempDir& t, const std::string& out_name) {
-  if (fs::exists(t.dir / out_name)) return false;
-  for (const auto& e : fs::directory_iterator(t.dir))
-    if (e.path().filename().string().find("geodrift-tmp") != std::string::npos) return false;
-  return true;
-}
+using Run = geodrift::test::CliRun;
+Run run(const std::string& args) { return geodrift::test::run_cli(GEODRIFT_CLI_EXE, args); }
 
 /// A small KITTI trajectory in M: 40 poses on a curve in M's x-z plane (y down, as a camera
 /// driving on flat ground), 0.5 M units apart.
@@ -114,36 +76,29 @@ int step_iterations(const std::string& json, const std::string& kind) {
   return n;
 }
 
-std::string read_text(const std::string& path) {
-  std::ifstream is(path);
-  std::stringstream ss;
-  ss << is.rdbuf();
-  return ss.str();
-}
-
 }  // namespace
 
 TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no output", "[cli]") {
-  TempDir t;
+  geodrift::test::TempDir t;
   const std::string traj = t.write("traj.txt", trajectory_text());
   const std::string good = t.write("good.csv", anchors_text({5, 15, 25, 35}));
   const std::string base = "correct --origin 49.0,8.4,100 --trajectory " + traj;
   const auto correct = [&](const std::string& anchors, const std::string& extra = "") {
-    return run(base + " --anchors " + anchors + " --out " + t.path("out") + " " + extra);
+    return run(base + " --anchors " + anchors + " --out " + t.file("out") + " " + extra);
   };
   const auto expect_failure = [&](const Run& r, const std::vector<std::string>& words) {
     INFO(r.output);
     CHECK(r.code != 0);
     for (const auto& w : words) CHECK(r.output.find(w) != std::string::npos);
-    CHECK(no_outputs(t, "out"));
+    CHECK(geodrift::test::no_outputs(t.path(), "out"));
   };
 
   SECTION("the good input works (so the failures below are the input's)") {
     const Run r = correct(good, "--mode init");
     INFO(r.output);
     REQUIRE(r.code == 0);
-    CHECK(fs::exists(t.path("out/trajectory.csv")));
-    CHECK(fs::exists(t.path("out/report.json")));
+    CHECK(fs::exists(t.file("out/trajectory.csv")));
+    CHECK(fs::exists(t.file("out/report.json")));
   }
   SECTION("fewer than 4 anchors") {
     expect_failure(correct(t.write("a.csv", anchors_text({5, 15, 25}))),
@@ -176,13 +131,13 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     nan.replace(third, 1, "nan");
     const std::string tn = t.write("nan.txt", nan);
     expect_failure(run("correct --origin 49,8.4,100 --trajectory " + tn + " --anchors " + good +
-                       " --out " + t.path("out")),
+                       " --out " + t.file("out")),
                    {"nan.txt:4"});
     std::string shrt = text;
     shrt.insert(third, "1 0 0 1 0 1 0\n");
     const std::string ts = t.write("short.txt", shrt);
     expect_failure(run("correct --origin 49,8.4,100 --trajectory " + ts + " --anchors " + good +
-                       " --out " + t.path("out")),
+                       " --out " + t.file("out")),
                    {"short.txt:4"});
   }
   SECTION("NaN and short lines in the times file") {
@@ -196,11 +151,11 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
                    {"t2.txt", "39 timestamps for 40"});
   }
   SECTION("a missing file") {
-    expect_failure(correct(t.path("no_such_anchors.csv")), {"no_such_anchors.csv"});
-    expect_failure(run("correct --trajectory " + t.path("no_such_traj.txt") + " --anchors " + good +
-                       " --out " + t.path("out")),
+    expect_failure(correct(t.file("no_such_anchors.csv")), {"no_such_anchors.csv"});
+    expect_failure(run("correct --trajectory " + t.file("no_such_traj.txt") + " --anchors " + good +
+                       " --out " + t.file("out")),
                    {"no_such_traj.txt"});
-    expect_failure(correct(good, "--map " + t.path("no_such_map")), {"no_such_map"});
+    expect_failure(correct(good, "--map " + t.file("no_such_map")), {"no_such_map"});
   }
   SECTION("bad values of the correction options") {
     expect_failure(correct(good, "--ba-min-parallax 90"), {"--ba-min-parallax", "[0, 90)"});
@@ -237,18 +192,18 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     CHECK(s == "precious");
   }
   SECTION("--out a non-empty folder needs --force, which keeps other files") {
-    fs::create_directories(t.path("out"));
+    fs::create_directories(t.file("out"));
     t.write("out/mine.txt", "precious\n");
     const Run r = correct(good, "--mode init");
     INFO(r.output);
     CHECK(r.code != 0);
     CHECK(r.output.find("not empty") != std::string::npos);
-    CHECK_FALSE(fs::exists(t.path("out/trajectory.csv")));
+    CHECK_FALSE(fs::exists(t.file("out/trajectory.csv")));
     const Run f = correct(good, "--mode init --force");
     INFO(f.output);
     CHECK(f.code == 0);
-    CHECK(fs::exists(t.path("out/trajectory.csv")));
-    CHECK(fs::exists(t.path("out/mine.txt")));
+    CHECK(fs::exists(t.file("out/trajectory.csv")));
+    CHECK(fs::exists(t.file("out/mine.txt")));
   }
   SECTION("every subcommand has --help") {
     for (const char* c : {"correct", "eval", "simulate"}) {
@@ -261,29 +216,29 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
 }
 
 TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only", "[cli]") {
-  TempDir t;
+  geodrift::test::TempDir t;
   const std::string data = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
   const Run sim = run("simulate --sequence 02 --frames 0:1000 --interval 100 --seed 3 --data-dir " +
-                      data + " --out " + t.path("sim"));
+                      data + " --out " + t.file("sim"));
   INFO(sim.output);
   REQUIRE(sim.code == 0);
   for (const char* f :
        {"trajectory_kitti.txt", "anchors.csv", "ground_truth_kitti.txt", "ground_truth_w.txt",
         "colmap/cameras.txt", "colmap/images.txt", "colmap/points3D.txt"})
-    CHECK(fs::exists(t.path("sim/") + f));
-  const std::string in = "--trajectory " + t.path("sim/trajectory_kitti.txt") + " --anchors " +
-                         t.path("sim/anchors.csv");
+    CHECK(fs::exists(t.file("sim/") + f));
+  const std::string in = "--trajectory " + t.file("sim/trajectory_kitti.txt") + " --anchors " +
+                         t.file("sim/anchors.csv");
   const auto correct_eval = [&](const std::string& name, const std::string& extra) {
-    const Run c = run("correct " + in + " " + extra + " --out " + t.path(name));
+    const Run c = run("correct " + in + " " + extra + " --out " + t.file(name));
     INFO(c.output);
     REQUIRE(c.code == 0);
-    const Run e = run("eval --json --result " + t.path(name) + " --ground-truth " +
-                      t.path("sim/ground_truth_kitti.txt") + " --kitti-to-w");
+    const Run e = run("eval --json --result " + t.file(name) + " --ground-truth " +
+                      t.file("sim/ground_truth_kitti.txt") + " --kitti-to-w");
     INFO(e.output);
     REQUIRE(e.code == 0);
     return mean_2d(e.output);
   };
-  const std::string map = "--map " + t.path("sim/colmap");
+  const std::string map = "--map " + t.file("sim/colmap");
   const double init = correct_eval("init", map + " --mode init");
   const double ours = correct_eval("ours", map);
   const double traj_only = correct_eval("traj", "");
@@ -294,12 +249,12 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
   for (const char* f :
        {"trajectory.csv", "trajectory_kitti.txt", "trajectory_tum.txt", "track.geojson",
         "track.kml", "points.ply", "topview.svg", "scale.svg", "report.json"})
-    CHECK(fs::exists(t.path("ours/") + f));
-  CHECK_FALSE(fs::exists(t.path("traj/points.ply")));
+    CHECK(fs::exists(t.file("ours/") + f));
+  CHECK_FALSE(fs::exists(t.file("traj/points.ply")));
 
   // The three options reach the Corrector and report.json records them.
   {
-    const std::string rep = read_text(t.path("ours/report.json"));
+    const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));
     CHECK(rep.find("\"first_window\": \"from-start\"") != std::string::npos);
     REQUIRE(json_numbers(rep, "ba_min_parallax_deg").size() == 1);
     CHECK(json_numbers(rep, "ba_min_parallax_deg")[0] == Approx(1.146));
@@ -310,10 +265,10 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
                       " --first-window paper --ba-min-parallax 0 --ba-cost-tolerance-sd 1000"
                       " --min-window-keyframes 0"
                       " --out " +
-                      t.path("opts"));
+                      t.file("opts"));
     INFO(c.output);
     REQUIRE(c.code == 0);
-    const std::string rep2 = read_text(t.path("opts/report.json"));
+    const std::string rep2 = geodrift::test::read_text(t.file("opts/report.json"));
     CHECK(rep2.find("\"first_window\": \"paper\"") != std::string::npos);
     CHECK(json_numbers(rep2, "ba_min_parallax_deg")[0] == 0.0);
     CHECK(json_numbers(rep2, "ba_cost_tolerance_sd")[0] == 1000.0);
@@ -357,9 +312,9 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
   }
 
   // A NaN in the map is named by file and line, and nothing is written.
-  fs::copy(t.path("sim/colmap"), t.path("badmap"));
+  fs::copy(t.file("sim/colmap"), t.file("badmap"));
   {
-    std::ifstream is(t.path("badmap/points3D.txt"));
+    std::ifstream is(t.file("badmap/points3D.txt"));
     std::vector<std::string> lines;
     std::string l;
     while (std::getline(is, l)) lines.push_back(l);
@@ -369,20 +324,20 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     REQUIRE(k + 1 < lines.size());
     const std::size_t x0 = lines[k + 1].find(' ') + 1, x1 = lines[k + 1].find(' ', x0);
     lines[k + 1].replace(x0, x1 - x0, "nan");  // the second point's X := nan
-    std::ofstream os(t.path("badmap/points3D.txt"));
+    std::ofstream os(t.file("badmap/points3D.txt"));
     for (const auto& x : lines) os << x << "\n";
-    const Run bad = run("correct " + in + " --map " + t.path("badmap") + " --out " + t.path("bad"));
+    const Run bad = run("correct " + in + " --map " + t.file("badmap") + " --out " + t.file("bad"));
     INFO(bad.output);
     CHECK(bad.code != 0);
     CHECK(bad.output.find("points3D.txt:" + std::to_string(k + 2)) != std::string::npos);
-    CHECK(no_outputs(t, "bad"));
+    CHECK(geodrift::test::no_outputs(t.path(), "bad"));
   }
 
   // Every input frame appears; with --keyframe-step the others are interpolated.
-  const Run c = run("correct " + in + " --keyframe-step 3 --out " + t.path("step"));
+  const Run c = run("correct " + in + " --keyframe-step 3 --out " + t.file("step"));
   INFO(c.output);
   REQUIRE(c.code == 0);
-  std::ifstream csv(t.path("step/trajectory.csv"));
+  std::ifstream csv(t.file("step/trajectory.csv"));
   std::string line;
   int rows = 0, interpolated = 0;
   while (std::getline(csv, line))
@@ -391,7 +346,7 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
       interpolated += line.find(",interpolated,") != std::string::npos;
     }
   int poses = 0;
-  std::ifstream tk(t.path("sim/trajectory_kitti.txt"));
+  std::ifstream tk(t.file("sim/trajectory_kitti.txt"));
   while (std::getline(tk, line)) poses += !line.empty() && line[0] != '#';
   CHECK(rows == poses);
   CHECK(interpolated > poses / 2);

@@ -9,6 +9,7 @@
 #include <geodrift/lie/sim3.hpp>
 #include <random>
 
+#include "support/kitti_camera.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -16,15 +17,7 @@ using namespace geodrift;
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-map::Camera kitti_camera() {
-  map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
-}
+using test::kitti_camera;
 
 double rotation_angle_deg(const lie::SE3d& a, const lie::SE3d& b) {
   return (a.rotation() * b.rotation().inverse()).log().norm() * 180.0 / kPi;

@@ -5,20 +5,14 @@
 #include <geodrift/geotag/panorama.hpp>
 #include <opencv2/core.hpp>
 
+#include "support/kitti_camera.hpp"
+
 using namespace geodrift;
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-map::Camera kitti_camera() {
-  map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
-}
+using test::kitti_camera;
 
 // A smooth function of the viewing direction (bearing relative to the panorama heading,
 // elevation), periodic in bearing.

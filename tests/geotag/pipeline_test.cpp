@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "support/kitti_camera.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -21,15 +22,7 @@ constexpr double kPi = 3.14159265358979323846;
 const std::string kData = std::string(GEODRIFT_DATA_DIR);
 const std::string kLundImages = kData + "/opensfm_lund/images/";
 
-map::Camera kitti_camera() {
-  map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
-}
+using test::kitti_camera;
 
 /// A vertical facade y = y0 (W), x in [x0, x0 + w], z in [z0, z0 + h], textured with `tex`.
 struct Facade {

@@ -26,6 +26,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "support/kitti_camera.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -64,15 +65,7 @@ const std::string& dataset() {
   return dir;
 }
 
-map::Camera kitti_camera() {
-  map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
-}
+using test::kitti_camera;
 
 /// Ground-truth T_cw in W of every dataset frame.
 std::vector<lie::SE3d> ground_truth(const std::string& dir) {

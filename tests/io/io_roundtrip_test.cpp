@@ -470,6 +470,9 @@ TEST_CASE("PLY point clouds round trip with and without colour", "[io][ply]") {
     CHECK(r.comments[1] == "frame: W = UTM 32N shifted");
     CHECK(r.comments[2] == "units: metres");
   }
+  // A monocular map frame says its coordinates are not metres.
+  io::write_ply(dir.file("m.ply"), cloud, "M (VO)", io::kMapUnits);
+  CHECK(io::read_ply(dir.file("m.ply")).comments.at(2) == std::string("units: ") + io::kMapUnits);
 }
 
 TEST_CASE("SVG plots keep equal aspect, north up, and state version and frame", "[io][svg]") {

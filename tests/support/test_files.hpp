@@ -37,6 +37,13 @@ class TempDir {
   TempDir(const TempDir&) = delete;
   TempDir& operator=(const TempDir&) = delete;
   std::string file(const std::string& name) const { return (path_ / name).string(); }
+  /// Writes `text` to the file `name` in the directory and returns its path.
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream out(file(name), std::ios::binary);
+    out << text;
+    REQUIRE(out.good());
+    return file(name);
+  }
   const std::filesystem::path& path() const { return path_; }
   /// Number of entries in the directory (to detect leftover temporary files).
   int num_entries() const {

@@ -7,12 +7,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "corridor.hpp"
 #include "geodrift/error.hpp"
 #include "geodrift/io/trajectory.hpp"
 #include "geodrift/vo/input.hpp"
 #include "geodrift/vo/odometry.hpp"
+#include "support/cli_run.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -103,6 +105,31 @@ TEST_CASE("Frame sources: KITTI folder order and times, unreadable video", "[vo]
              Catch::Contains("does not exist"));
 }
 
+TEST_CASE("A video file is read frame by frame, in grey, with container timestamps", "[vo]") {
+  // OpenCV's built-in MJPEG writer needs no codec library, so the file exists on every machine.
+  test::TempDir t;
+  const std::string path = t.file("drive.avi");
+  {
+    cv::VideoWriter w(path, cv::CAP_OPENCV_MJPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0,
+                      cv::Size(64, 48), true);
+    REQUIRE(w.isOpened());
+    for (int i = 0; i < 5; ++i) w.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(40 * i + 20)));
+  }
+  auto src = vo::open_video(path);
+  CHECK(src->size() == -1);
+  vo::Frame f;
+  int n = 0;
+  while (src->next(&f)) {
+    CHECK(f.index == n);
+    CHECK(f.gray.type() == CV_8UC1);
+    CHECK(f.gray.size() == cv::Size(64, 48));
+    CHECK(std::abs(f.gray.at<std::uint8_t>(24, 32) - (40 * n + 20)) <= 3);  // JPEG rounding
+    CHECK(f.timestamp == Approx(0.1 * n).margin(1e-6));
+    ++n;
+  }
+  CHECK(n == 5);
+}
+
 TEST_CASE("Black frames and pure rotation never initialise, with the reason", "[vo]") {
   const map::Camera cam = test::corridor_camera();
   {
@@ -144,28 +171,8 @@ TEST_CASE("Black frames and pure rotation never initialise, with the reason", "[
 
 #ifdef GEODRIFT_CLI_EXE
 namespace {
-struct Run {
-  int code = -1;
-  std::string output;
-};
-Run run(const std::string& args) {
-  const std::string cmd = std::string("'") + GEODRIFT_CLI_EXE + "' " + args + " 2>&1";
-  Run r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  REQUIRE(p != nullptr);
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-bool no_outputs(const test::TempDir& t, const std::string& out) {
-  if (fs::exists(t.path() / out)) return false;
-  for (const auto& e : fs::directory_iterator(t.path()))
-    if (e.path().filename().string().find("geodrift-tmp") != std::string::npos) return false;
-  return true;
-}
+using Run = test::CliRun;
+Run run(const std::string& args) { return test::run_cli(GEODRIFT_CLI_EXE, args); }
 }  // namespace
 
 TEST_CASE("geodrift run fails cleanly on bad input and leaves no output", "[vo][cli]") {
@@ -210,7 +217,7 @@ TEST_CASE("geodrift run fails cleanly on bad input and leaves no output", "[vo][
     INFO(c.args << "\n" << r.output);
     CHECK(r.code != 0);
     CHECK_THAT(r.output, Catch::Contains(c.expect));
-    CHECK(no_outputs(t, "out"));
+    CHECK(test::no_outputs(t.path(), "out"));
   }
 }
 #endif

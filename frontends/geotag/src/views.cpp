@@ -1,13 +1,17 @@
 #include "geodrift/geotag/views.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
 #include <sstream>
 
 #include "geodrift/error.hpp"
+#include "geodrift/geotag/exif.hpp"
 #include "geodrift/geotag/panorama.hpp"
 
 namespace geodrift::geotag {
@@ -94,6 +98,17 @@ bool image_size(const std::string& path, int* w, int* h) {
   return true;
 }
 
+/// Size of the image as OpenCV decodes it: a JPEG whose EXIF orientation is not 1 may be
+/// turned upright (5..8 swap width and height), depending on where its Exif block sits (OpenCV
+/// reads the first APP1 segment only), so such photos are decoded once to know.
+bool decoded_size(const std::string& path, int* w, int* h) {
+  const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  if (img.empty()) return false;
+  *w = img.cols;
+  *h = img.rows;
+  return true;
+}
+
 }  // namespace
 
 std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
@@ -150,17 +165,6 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
     GeoSource s;
     s.tag.id = c_id >= 0 ? static_cast<int>(parse_number(f[c_id], csv_path, lineno, "id"))
                          : static_cast<int>(out.size());
-    s.tag.latitude_deg = parse_number(f[c_lat], csv_path, lineno, "latitude");
-    s.tag.longitude_deg = parse_number(f[c_lon], csv_path, lineno, "longitude");
-    s.tag.height = parse_number(f[c_h], csv_path, lineno, "height");
-    const double heading_deg = parse_number(f[c_head], csv_path, lineno, "heading_deg");
-    if (std::abs(s.tag.latitude_deg) > 90)
-      fail(csv_path, lineno, "latitude " + f[c_lat] + " outside [-90, 90]");
-    if (std::abs(s.tag.longitude_deg) > 180)
-      fail(csv_path, lineno, "longitude " + f[c_lon] + " outside [-180, 180]");
-    s.tag.heading = std::fmod(std::fmod(heading_deg, 360.0) + 360.0, 360.0) * kDeg;
-    if (c_frame >= 0 && !f[c_frame].empty())
-      s.frame = static_cast<int>(parse_number(f[c_frame], csv_path, lineno, "frame"));
     if (f[c_file].empty()) fail(csv_path, lineno, "empty file name");
     fs::path p(f[c_file]);
     if (p.is_relative()) {
@@ -170,6 +174,46 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
       p = a;
     }
     s.path = p.lexically_normal().string();
+    // An empty latitude/longitude/height/heading_deg cell is taken from the image's EXIF.
+    std::optional<ExifGeotag> exif;
+    const auto exif_of = [&]() -> const ExifGeotag& {
+      if (!exif) {
+        if (!fs::is_regular_file(p))
+          fail(csv_path, lineno, "image '" + s.path + "' does not exist");
+        try {
+          exif = read_exif(s.path);
+        } catch (const Error& e) {
+          fail(csv_path, lineno, e.what());
+        }
+      }
+      return *exif;
+    };
+    const auto value = [&](int c, double ExifGeotag::*field, const char* name,
+                           const char* exif_name) {
+      if (!f[c].empty()) return parse_number(f[c], csv_path, lineno, name);
+      const double v = exif_of().*field;
+      if (!std::isfinite(v))
+        fail(csv_path, lineno,
+             std::string(name) + " is empty and image '" + s.path + "' has no EXIF GPS " +
+                 exif_name);
+      return v;
+    };
+    s.tag.latitude_deg = value(c_lat, &ExifGeotag::latitude_deg, "latitude", "latitude");
+    s.tag.longitude_deg = value(c_lon, &ExifGeotag::longitude_deg, "longitude", "longitude");
+    s.tag.height = value(c_h, &ExifGeotag::altitude_m, "height", "altitude");
+    const double heading_deg = f[c_head].empty()
+                                   ? exif_of().true_heading_deg
+                                   : parse_number(f[c_head], csv_path, lineno, "heading_deg");
+    if (std::abs(s.tag.latitude_deg) > 90)
+      fail(csv_path, lineno, "latitude " + f[c_lat] + " outside [-90, 90]");
+    if (std::abs(s.tag.longitude_deg) > 180)
+      fail(csv_path, lineno, "longitude " + f[c_lon] + " outside [-180, 180]");
+    // NaN (unknown) only for a photo without a heading cell or EXIF true heading; checked below.
+    s.tag.heading = std::isfinite(heading_deg)
+                        ? std::fmod(std::fmod(heading_deg, 360.0) + 360.0, 360.0) * kDeg
+                        : std::numeric_limits<double>::quiet_NaN();
+    if (c_frame >= 0 && !f[c_frame].empty())
+      s.frame = static_cast<int>(parse_number(f[c_frame], csv_path, lineno, "frame"));
     int w = 0, h = 0;
     if (!fs::is_regular_file(p)) fail(csv_path, lineno, "image '" + s.path + "' does not exist");
     if (!image_size(s.path, &w, &h))
@@ -188,6 +232,14 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
       fail(csv_path, lineno,
            "panorama '" + s.path + "' is " + std::to_string(w) + "x" + std::to_string(h) +
                ", not 2:1 equirectangular");
+    if (s.kind == SourceKind::kPanorama && !std::isfinite(s.tag.heading))
+      fail(csv_path, lineno,
+           "panorama '" + s.path +
+               "' needs a heading: heading_deg is empty and the image has no EXIF true "
+               "GPSImgDirection" +
+               (std::isfinite(exif_of().magnetic_heading_deg) ? " (only a magnetic one)" : ""));
+    if (s.kind == SourceKind::kPhoto && exif_of().orientation > 1 && !decoded_size(s.path, &w, &h))
+      fail(csv_path, lineno, "image '" + s.path + "' cannot be read");
     if (s.kind == SourceKind::kPhoto) {
       map::Camera& c = s.photo_camera;
       c.id = -1;
@@ -205,10 +257,15 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
         c.fx = c.fy = 0.5 * w / std::tan(0.5 * options.photo_hfov_deg * kDeg);
         c.cx = 0.5 * w - 0.5;
         c.cy = 0.5 * h - 0.5;
+      } else if (std::isfinite(exif_of().focal_length_35mm)) {
+        c.fx = c.fy = focal_px_from_35mm(exif_of().focal_length_35mm, w, h);
+        c.cx = 0.5 * w - 0.5;
+        c.cy = 0.5 * h - 0.5;
       } else {
         fail(csv_path, lineno,
              "photo '" + s.path +
-                 "' has no intrinsics (give columns fx, fy, cx, cy or a field of view)");
+                 "' has no intrinsics (give columns fx, fy, cx, cy or a field of view; its EXIF "
+                 "has no FocalLengthIn35mmFilm)");
       }
       try {
         c.validate();
@@ -220,6 +277,116 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
   }
   if (out.empty()) throw Error("geo-tag CSV '" + csv_path + "' has a header but no rows");
   return out;
+}
+
+std::vector<GeoSource> read_geotag_jpeg_folder(const std::string& dir,
+                                               const GeoSourceOptions& options,
+                                               std::vector<std::string>* skipped) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error("geo-tag folder '" + dir + "' is not a directory");
+  const bool hfov = std::isfinite(options.photo_hfov_deg);
+  if (hfov && !(options.photo_hfov_deg > 1 && options.photo_hfov_deg < 179))
+    throw InvalidArgument("photo horizontal field of view " +
+                          std::to_string(options.photo_hfov_deg) + " deg outside (1, 179)");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    std::string ext = e.path().extension().string();
+    for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if ((ext == ".jpg" || ext == ".jpeg") && e.is_regular_file(ec)) files.push_back(e.path());
+  }
+  if (ec) throw Error("cannot list geo-tag folder '" + dir + "': " + ec.message());
+  if (files.empty())
+    throw Error("geo-tag folder '" + dir + "' has neither geotags.csv nor JPEG files");
+  std::sort(files.begin(), files.end());
+  std::vector<GeoSource> out;
+  std::vector<std::string> why;
+  for (const fs::path& file : files) {
+    const std::string path = fs::absolute(file).lexically_normal().string();
+    const auto skip = [&](const std::string& reason) { why.push_back(path + ": " + reason); };
+    ExifGeotag x;
+    int w = 0, h = 0;
+    try {
+      x = read_exif(path);
+    } catch (const Error& e) {
+      skip(e.what());
+      continue;
+    }
+    if (!image_size(path, &w, &h)) {
+      skip("cannot be read as an image");
+      continue;
+    }
+    if (!x.has_gps_position()) {
+      skip(x.has_exif ? "no EXIF GPS position (GPSLatitude/GPSLongitude with their refs)"
+                      : "no EXIF block");
+      continue;
+    }
+    if (!std::isfinite(x.altitude_m)) {
+      skip("no EXIF GPS altitude");
+      continue;
+    }
+    GeoSource s;
+    s.tag.id = static_cast<int>(out.size());
+    s.tag.latitude_deg = x.latitude_deg;
+    s.tag.longitude_deg = x.longitude_deg;
+    s.tag.height = x.altitude_m;
+    if (std::isfinite(x.true_heading_deg)) s.tag.heading = x.true_heading_deg * kDeg;
+    s.path = path;
+    s.kind = (w == 2 * h) ? SourceKind::kPanorama : SourceKind::kPhoto;
+    if (s.kind == SourceKind::kPanorama) {
+      if (!std::isfinite(s.tag.heading)) {
+        skip(std::string("2:1 panorama without an EXIF true GPSImgDirection") +
+             (std::isfinite(x.magnetic_heading_deg) ? " (only a magnetic one)" : ""));
+        continue;
+      }
+    } else {
+      if (x.orientation > 1 && !decoded_size(path, &w, &h)) {
+        skip("cannot be read as an image");
+        continue;
+      }
+      map::Camera& c = s.photo_camera;
+      c.id = -1;
+      c.width = w;
+      c.height = h;
+      if (hfov) {
+        c.fx = c.fy = 0.5 * w / std::tan(0.5 * options.photo_hfov_deg * kDeg);
+      } else if (std::isfinite(x.focal_length_35mm)) {
+        c.fx = c.fy = focal_px_from_35mm(x.focal_length_35mm, w, h);
+      } else {
+        skip("no focal length (no EXIF FocalLengthIn35mmFilm; give a photo field of view)");
+        continue;
+      }
+      c.cx = 0.5 * w - 0.5;
+      c.cy = 0.5 * h - 0.5;
+      try {
+        c.validate();
+      } catch (const InvalidArgument& e) {
+        skip(e.what());
+        continue;
+      }
+    }
+    out.push_back(std::move(s));
+  }
+  if (out.empty()) {
+    std::string list;
+    for (const std::string& r : why) list += "\n  " + r;
+    throw InvalidArgument("geo-tag folder '" + dir + "': none of its " +
+                          std::to_string(files.size()) + " JPEG files is usable:" + list);
+  }
+  if (skipped) *skipped = std::move(why);
+  return out;
+}
+
+std::vector<GeoSource> read_geotag_sources(const std::string& path, const GeoSourceOptions& options,
+                                           std::vector<std::string>* skipped) {
+  namespace fs = std::filesystem;
+  if (skipped) skipped->clear();
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error("geo-tags '" + path + "' do not exist");
+  if (!fs::is_directory(path, ec)) return read_geotag_csv(path, options);
+  const fs::path csv = fs::path(path) / "geotags.csv";
+  if (fs::exists(csv, ec)) return read_geotag_csv(csv.string(), options);
+  return read_geotag_jpeg_folder(path, options, skipped);
 }
 
 std::vector<GeoView> make_views(const std::vector<GeoSource>& sources, const map::Camera& video) {

@@ -36,6 +36,42 @@ double since(Clock::time_point t0) {
 
 using Desc = std::array<std::uint8_t, 32>;
 
+/// The smallest and second-smallest descriptor distances offered, with the best candidate.
+struct BestTwo {
+  int best = 256, second = 256, index = -1;
+  void offer(int d, int k) {
+    if (d < best) {
+      second = best;
+      best = d;
+      index = k;
+    } else if (d < second) {
+      second = d;
+    }
+  }
+  /// A candidate exists, is within `max_distance` and passes the ratio test.
+  bool accepted(int max_distance, double ratio) const {
+    return index >= 0 && best <= max_distance && best <= ratio * second;
+  }
+};
+
+/// One-to-one matching (ORB-SLAM's rotation-free variant): query i claims candidate k at
+/// distance d unless k already holds an owner at a distance <= d; a displaced owner loses its
+/// match. match[i] = candidate of query i or -1.
+struct OneToOne {
+  std::vector<int> match, owner, owner_d;
+  OneToOne(std::size_t queries, std::size_t candidates)
+      : match(queries, -1), owner(candidates, -1), owner_d(candidates, 256) {}
+  void claim(int i, int k, int d) {
+    if (owner[k] >= 0) {
+      if (d >= owner_d[k]) return;
+      match[owner[k]] = -1;
+    }
+    owner[k] = i;
+    owner_d[k] = d;
+    match[i] = k;
+  }
+};
+
 /// Keypoints of one image with a cell index for radius queries.
 struct FrameData {
   int index = -1;
@@ -405,21 +441,13 @@ struct Odometry::Impl {
       if (K.pt[i] >= 0 && !pt(K.pt[i]).bad) kidx.push_back(static_cast<int>(i));
     std::vector<int> owner(f.kps.size(), -1), owner_d(f.kps.size(), 256);
     for (int i : kidx) {
-      int best = 256, second = 256, bk = -1;
-      for (std::size_t k = 0; k < f.kps.size(); ++k) {
-        const int d = hamming(K.d(i), f.d(static_cast<int>(k)));
-        if (d < best) {
-          second = best;
-          best = d;
-          bk = static_cast<int>(k);
-        } else if (d < second) {
-          second = d;
-        }
-      }
-      if (bk < 0 || best > kThLow || best > 0.75 * second) continue;
-      if (best < owner_d[bk]) {
-        owner[bk] = K.pt[i];
-        owner_d[bk] = best;
+      BestTwo b;
+      for (std::size_t k = 0; k < f.kps.size(); ++k)
+        b.offer(hamming(K.d(i), f.d(static_cast<int>(k))), static_cast<int>(k));
+      if (!b.accepted(kThLow, 0.75)) continue;
+      if (b.best < owner_d[b.index]) {
+        owner[b.index] = K.pt[i];
+        owner_d[b.index] = b.best;
       }
     }
     std::vector<cv::Point3d> obj;
@@ -530,29 +558,15 @@ struct Odometry::Impl {
     FrameData& r = *init_ref;
     // Matching for initialisation (ORB-SLAM SearchForInitialization): same octave, 100 px
     // window, Hamming < 50, ratio 0.9, one-to-one.
-    std::vector<int> match(r.kps.size(), -1), owner(f.kps.size(), -1), owner_d(f.kps.size(), 256);
+    OneToOne m11(r.kps.size(), f.kps.size());
     for (std::size_t i = 0; i < r.kps.size(); ++i) {
       const int oc = r.kps[i].octave;
-      int best = 256, second = 256, bk = -1;
-      f.for_each_in_radius(r.kps[i].pt.x, r.kps[i].pt.y, 100.0, oc, oc, [&](int k) {
-        const int d = hamming(r.d(static_cast<int>(i)), f.d(k));
-        if (d < best) {
-          second = best;
-          best = d;
-          bk = k;
-        } else if (d < second) {
-          second = d;
-        }
-      });
-      if (bk < 0 || best > kThLow || best > 0.9 * second) continue;
-      if (owner[bk] >= 0) {
-        if (best >= owner_d[bk]) continue;
-        match[owner[bk]] = -1;
-      }
-      owner[bk] = static_cast<int>(i);
-      owner_d[bk] = best;
-      match[i] = bk;
+      BestTwo b;
+      f.for_each_in_radius(r.kps[i].pt.x, r.kps[i].pt.y, 100.0, oc, oc,
+                           [&](int k) { b.offer(hamming(r.d(static_cast<int>(i)), f.d(k)), k); });
+      if (b.accepted(kThLow, 0.9)) m11.claim(static_cast<int>(i), b.index, b.best);
     }
+    const std::vector<int>& match = m11.match;
     std::vector<Eigen::Vector2d> x1, x2;
     std::vector<std::pair<int, int>> pairs;
     for (std::size_t i = 0; i < match.size(); ++i)
@@ -844,8 +858,7 @@ struct Odometry::Impl {
       // candidate the box query would, in the same order.
       const double w = 1.96 * scale.back();
       const double reach = std::sqrt(2.0) * (6.0 + w) + w + 1.0;
-      std::vector<int> owner(k2.kps.size(), -1), owner_d(k2.kps.size(), 256);
-      std::vector<int> match(k1.kps.size(), -1);
+      OneToOne m11(k1.kps.size(), k2.kps.size());
       for (std::size_t i = 0; i < k1.kps.size(); ++i) {
         if (k1.pt[i] >= 0) continue;
         const Eigen::Vector3d n1 = Kinv * Eigen::Vector3d(k1.kps[i].pt.x, k1.kps[i].pt.y, 1.0);
@@ -855,7 +868,7 @@ struct Odometry::Impl {
         const double margin = 6.0;
         const Eigen::Vector3d l = F21 * Eigen::Vector3d(k1.kps[i].pt.x, k1.kps[i].pt.y, 1.0);
         const double ln2 = l.head<2>().squaredNorm();
-        int best = 256, second = 256, bk = -1;
+        BestTwo bt;
         k2.for_each_near_segment(
             pa, pb, reach, std::min(pa.x(), pb.x()) - margin, std::min(pa.y(), pb.y()) - margin,
             std::max(pa.x(), pb.x()) + margin, std::max(pa.y(), pb.y()) + margin, [&](int j) {
@@ -863,24 +876,11 @@ struct Odometry::Impl {
               const double e = l.x() * k2.kps[j].pt.x + l.y() * k2.kps[j].pt.y + l.z();
               const double s2 = scale[octave(k2.kps[j])];
               if (e * e > 3.84 * ln2 * s2 * s2) return;
-              const int d = hamming(k1.d(static_cast<int>(i)), k2.d(j));
-              if (d < best) {
-                second = best;
-                best = d;
-                bk = j;
-              } else if (d < second) {
-                second = d;
-              }
+              bt.offer(hamming(k1.d(static_cast<int>(i)), k2.d(j)), j);
             });
-        if (bk < 0 || best > kThLow || best > 0.8 * second) continue;
-        if (owner[bk] >= 0) {
-          if (best >= owner_d[bk]) continue;
-          match[owner[bk]] = -1;
-        }
-        owner[bk] = static_cast<int>(i);
-        owner_d[bk] = best;
-        match[i] = bk;
+        if (bt.accepted(kThLow, 0.8)) m11.claim(static_cast<int>(i), bt.index, bt.best);
       }
+      const std::vector<int>& match = m11.match;
       Eigen::Matrix<double, 3, 4> P1, P2;
       P1 << R1, t1;
       P2 << R2, t2;

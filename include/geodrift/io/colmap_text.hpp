@@ -380,14 +380,16 @@ inline ColmapModel read_colmap_text(const std::string& dir) {
 /// directory, each file atomically, with '#' header lines stating geodrift's version, the frame
 /// (`frame_note`, e.g. "W = UTM 32N ..."), units and COLMAP's column descriptions. Image names are
 /// `image_names` when given (same order as keyframes), else "<frame_index>.png" with 6 digits.
-/// Point colours/errors default to grey and 0 when not given.
+/// Point colours/errors default to grey and 0 when not given. `units`: the length unit stated
+/// ("metres" in W, kMapUnits in a monocular map frame M).
 /// @throws InvalidArgument for an observation naming an unknown keyframe/point or sizes that do
 ///         not match; Error on I/O failure.
 inline void write_colmap_text(const std::string& dir, const map::Map& m,
                               const std::string& frame_note,
                               const std::vector<std::string>& image_names = {},
                               const std::vector<std::array<std::uint8_t, 3>>& point_colors = {},
-                              const std::vector<double>& point_errors = {}) {
+                              const std::vector<double>& point_errors = {},
+                              const std::string& units = "metres") {
   GEODRIFT_CHECK(image_names.empty() || image_names.size() == m.keyframes.size(),
                  "write_colmap_text: " << image_names.size() << " image names for "
                                        << m.keyframes.size() << " keyframes");
@@ -409,7 +411,8 @@ inline void write_colmap_text(const std::string& dir, const map::Map& m,
       track_of_point[it->second[i]->point].push_back({k.id, i});
   }
   const std::string head = std::string("# geodrift ") + kVersion +
-                           " COLMAP text model; frame: " + frame_note + "; units: metres, pixels\n";
+                           " COLMAP text model; frame: " + frame_note + "; units: " + units +
+                           ", pixels\n";
 
   detail::write_atomically(dir + "/cameras.txt", [&](std::ostream& os) {
     os << head << "# Camera list with one line of data per camera:\n"

@@ -35,11 +35,12 @@ struct PointCloud {
   std::vector<std::string> comments;  ///< header comments (read only)
 };
 
-/// Writes an ASCII PLY atomically, stating the version, `frame_note` and units in comments.
+/// Writes an ASCII PLY atomically, stating the version, `frame_note` and `units` ("metres" in W,
+/// kMapUnits in a monocular map frame M) in comments.
 /// @throws InvalidArgument if a point is not finite or the colours do not match the points;
 ///         Error on I/O failure.
 inline void write_ply(const std::string& path, const PointCloud& cloud,
-                      const std::string& frame_note) {
+                      const std::string& frame_note, const std::string& units = "metres") {
   GEODRIFT_CHECK(
       cloud.colors.empty() || cloud.colors.size() == cloud.points.size(),
       "write_ply: " << cloud.colors.size() << " colours for " << cloud.points.size() << " points");
@@ -48,7 +49,7 @@ inline void write_ply(const std::string& path, const PointCloud& cloud,
   const bool rgb = !cloud.colors.empty();
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "ply\nformat ascii 1.0\ncomment geodrift " << kVersion << " map points\n"
-       << "comment frame: " << frame_note << "\ncomment units: metres\n"
+       << "comment frame: " << frame_note << "\ncomment units: " << units << "\n"
        << "element vertex " << cloud.points.size() << "\n"
        << "property double x\nproperty double y\nproperty double z\n";
     if (rgb) os << "property uchar red\nproperty uchar green\nproperty uchar blue\n";

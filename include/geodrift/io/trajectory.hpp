@@ -234,16 +234,19 @@ inline Trajectory read_trajectory(const std::string& path,
 /// @param frame_note       description of the world frame, e.g. "W = UTM 32N shifted to ...".
 /// @param write_frame_index prefix each line with TrajectoryPose::frame (13 fields; evo reads
 ///                          only the 12-field form, so the default is false).
+/// @param units            length unit stated in the header: "metres" in W; a VO or simulated
+///                          map frame M passes kMapUnits.
 /// @throws Error on I/O failure; InvalidArgument if a pose is not finite.
 inline void write_trajectory_kitti(const std::string& path, const Trajectory& traj,
-                                   const std::string& frame_note, bool write_frame_index = false) {
+                                   const std::string& frame_note, bool write_frame_index = false,
+                                   const std::string& units = "metres") {
   for (std::size_t i = 0; i < traj.poses.size(); ++i)
     GEODRIFT_CHECK(traj.poses[i].T_cw.matrix().allFinite(),
                    "write_trajectory_kitti: pose " << i << " is not finite");
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "# geodrift " << kVersion << " KITTI trajectory: camera-to-world poses T_wc as 3x4 [R|t] "
        << "row-major" << (write_frame_index ? " after a frame index" : "")
-       << "; world frame: " << frame_note << "; units: metres\n";
+       << "; world frame: " << frame_note << "; units: " << units << "\n";
     for (const TrajectoryPose& p : traj.poses) {
       const Eigen::Matrix4d T = p.T_cw.inverse().matrix();
       if (write_frame_index) os << p.frame << ' ';
@@ -263,7 +266,8 @@ inline void write_trajectory_kitti(const std::string& path, const Trajectory& tr
 /// (a KITTI source), every pose's frame index is written as its timestamp and the header says so.
 /// @throws Error on I/O failure; InvalidArgument if a pose is not finite.
 inline void write_trajectory_tum(const std::string& path, const Trajectory& traj,
-                                 const std::string& frame_note) {
+                                 const std::string& frame_note,
+                                 const std::string& units = "metres") {
   bool all_timestamps = true;
   for (std::size_t i = 0; i < traj.poses.size(); ++i) {
     GEODRIFT_CHECK(traj.poses[i].T_cw.matrix().allFinite(),
@@ -273,7 +277,7 @@ inline void write_trajectory_tum(const std::string& path, const Trajectory& traj
   detail::write_atomically(path, [&](std::ostream& os) {
     os << "# geodrift " << kVersion
        << " TUM trajectory: timestamp tx ty tz qx qy qz qw, camera-to-world poses T_wc; "
-       << "world frame: " << frame_note << "; units: seconds, metres"
+       << "world frame: " << frame_note << "; units: seconds, " << units
        << (all_timestamps ? "" : "; timestamps are frame indices (source had no timestamps)")
        << "\n";
     for (const TrajectoryPose& p : traj.poses) {

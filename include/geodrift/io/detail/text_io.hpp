@@ -29,6 +29,14 @@
 
 #include "geodrift/error.hpp"
 
+namespace geodrift::io {
+
+/// The length unit the writers state for a monocular map frame M (VO output, simulated SLAM):
+/// its scale is arbitrary and drifts, so its coordinates are not metres.
+inline constexpr const char* kMapUnits = "M units (arbitrary scale, not metres)";
+
+}  // namespace geodrift::io
+
 namespace geodrift::io::detail {
 
 /// Throws InvalidArgument "<path>:<line>: <what>".

@@ -18,11 +18,21 @@
 ///                                     (a phone's GPS altitude) is taken as given
 ///   heading_deg [true_heading_deg]    true heading of the panorama's centre column or of the
 ///                                     photo's optical axis, degrees clockwise from north
+///   An EMPTY latitude, longitude, height or heading_deg cell is read from the image's EXIF
+///   (read_exif(): GPSLatitude, GPSLongitude, GPSAltitude taken as given like altitude_m, and a
+///   TRUE GPSImgDirection; a magnetic one is not used). A needed value the EXIF lacks is an
+///   error, except the heading of a photo: it then stays unknown (NaN; retrieval, matching and
+///   localization do not use it, view_pose_world() refuses it). A panorama needs a heading.
 ///   id (optional)                     geo-tag id (default: row number from 0)
 ///   kind (optional)                   "panorama" or "photo"; when absent, a 2:1 image is a
 ///                                     panorama, anything else a photo
-///   fx, fy, cx, cy (optional)         photo intrinsics in pixels of the file; otherwise
-///                                     GeoSourceOptions::photo_hfov_deg must be given
+///   fx, fy, cx, cy (optional)         photo intrinsics in pixels of the image as OpenCV
+///                                     decodes it (EXIF orientation applied when OpenCV sees it;
+///                                     such photos are decoded once to get their size);
+///                                     otherwise from GeoSourceOptions::photo_hfov_deg, else from
+///                                     the EXIF FocalLengthIn35mmFilm f35: fx = fy = f35 *
+///                                     (image diagonal in px) / 43.27 mm (the 35 mm-equivalent
+///                                     definition, focal_px_from_35mm()), cx, cy at the centre
 ///   frame (optional)                  nearest video frame (the renderer writes it; evaluation)
 /// The renderer's geotags.csv (`id,file,latitude,longitude,height,heading_deg,x,y,z,frame`) is
 /// read as is; extra columns are ignored.
@@ -43,7 +53,8 @@ enum class SourceKind { kPanorama, kPhoto };
 
 /// One geo-tagged image file.
 struct GeoSource {
-  map::GeoTag tag;   ///< position; tag.heading = centre-column / optical-axis heading (rad)
+  map::GeoTag tag;   ///< position; tag.heading = centre-column / optical-axis heading (rad; NaN =
+                     ///< unknown, photos only)
   std::string path;  ///< absolute path of the image
   SourceKind kind = SourceKind::kPanorama;
   map::Camera photo_camera;  ///< photos only: intrinsics of the file (width/height filled on load)
@@ -65,12 +76,34 @@ struct GeoSourceOptions {
 std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
                                        const GeoSourceOptions& options = {});
 
+/// The sources of a folder of geo-tagged JPEG photos that has no geotags.csv: every *.jpg /
+/// *.jpeg (any case), sorted by name, with EXIF GPS latitude, longitude and altitude becomes a
+/// source (id = its rank among the usable files, frame -1). Its heading is the EXIF true
+/// GPSImgDirection, NaN if absent. A 2:1 image is a panorama (and needs that heading), any other
+/// a photo with intrinsics from options.photo_hfov_deg if given, else from
+/// FocalLengthIn35mmFilm (as read_geotag_csv()). Files that cannot be used (no EXIF GPS
+/// position or altitude, no focal length, a panorama without true heading, unreadable) are
+/// SKIPPED, each listed as "<path>: <reason>" in *skipped for the caller to report.
+/// @throws Error if `dir` is not a folder or holds no JPEG; InvalidArgument listing every
+///         reason if no file is usable.
+std::vector<GeoSource> read_geotag_jpeg_folder(const std::string& dir,
+                                               const GeoSourceOptions& options = {},
+                                               std::vector<std::string>* skipped = nullptr);
+
+/// What `--geotags PATH` names: a geo-tag CSV file, a folder holding geotags.csv (read as a CSV),
+/// or a folder of geo-tagged JPEGs (read_geotag_jpeg_folder(), whose skipped files are returned
+/// in *skipped; cleared otherwise).
+/// @throws Error if PATH does not exist; as the readers otherwise.
+std::vector<GeoSource> read_geotag_sources(const std::string& path,
+                                           const GeoSourceOptions& options = {},
+                                           std::vector<std::string>* skipped = nullptr);
+
 /// One view of the database.
 struct GeoView {
   int id = 0;          ///< index in the database
   int source = 0;      ///< index of its GeoSource
   map::GeoTag tag;     ///< the source's geo-tag (tag.heading = the SOURCE's heading)
-  double heading = 0;  ///< true heading of this view's optical axis (rad, [0, 2 pi))
+  double heading = 0;  ///< true heading of this view's optical axis (rad, [0, 2 pi)); NaN: unknown
   int direction = -1;  ///< panorama cut k in [0, 8) (heading = tag.heading + k * 45 deg); -1: photo
   map::Camera camera;  ///< intrinsics of the view image
   int frame = -1;      ///< the source's nearest video frame, -1 if unknown
@@ -86,6 +119,7 @@ Eigen::Vector3d view_position_world(const GeoView& view, const geo::LocalFrame& 
 /// The view's pose in W as a world -> camera transform T_cw (camera x right, y down, z forward):
 /// a level camera at the geo-tag position whose optical axis has the view's true heading, turned
 /// into grid yaw with the meridian convergence (geo::LocalFrame::grid_yaw_from_heading()).
+/// @throws InvalidArgument if the view's heading is unknown (NaN: a photo without heading).
 lie::SE3d view_pose_world(const GeoView& view, const geo::LocalFrame& frame);
 
 }  // namespace geodrift::geotag
