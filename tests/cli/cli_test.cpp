@@ -291,10 +291,10 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     // path lengthens every window back to the first keyframe.
     CHECK(*std::max_element(windows.begin() + 1, windows.end()) > 0);
     const Run w = run("correct " + in + " " + map + " --min-window-keyframes 1000000 --out " +
-                      t.path("longwin"));
+                      t.file("longwin"));
     INFO(w.output);
     REQUIRE(w.code == 0);
-    const std::string rep3 = read_text(t.path("longwin/report.json"));
+    const std::string rep3 = geodrift::test::read_text(t.file("longwin/report.json"));
     CHECK(json_numbers(rep3, "min_window_keyframes")[0] == 1000000);
     const auto windows3 = json_numbers(rep3, "window_keyframes");
     REQUIRE(windows3.size() == windows.size());
