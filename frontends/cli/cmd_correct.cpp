@@ -60,6 +60,12 @@ options
                       the first keyframe and holds INIT's anchors too (from-start), or spans
                       only the keyframes of its newest 3 anchors (paper; measured on simulated
                       KITTI 08 it let the first windows roll about nearly collinear anchors)
+  --min-window-keyframes N
+                      the sliding window is lengthened to older anchors until it spans at
+                      least N keyframes (default 30: about 90 frames; it matters when anchors
+                      are denser than every ~10 keyframes, e.g. street-view panoramas every
+                      few metres; 0 keeps exactly the paper's window of the newest 3 anchors);
+                      an integer in [0, 1000000]
   --ba-min-parallax DEG
                       bundle adjustment leaves out map points whose rays from the window's
                       keyframes span less than DEG degrees (they move with their reference
@@ -68,7 +74,7 @@ options
   --ba-cost-tolerance-sd X
                       bundle adjustment stops when a step lowers the cost by less than X
                       standard deviations of the cost at the noise level (sqrt(m/2) for m
-                      scalar residuals); default 0.1, must be >= 0 (0: the solver's own limits)
+                      scalar residuals); default 1, must be >= 0 (0: the solver's own limits)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --help              this text
@@ -174,11 +180,11 @@ double number_option(const Args& args, const std::string& key, double def) {
 }  // namespace
 
 int run_correct(int argc, char** argv) {
-  const Args args(
-      argc, argv,
-      {"trajectory", "format", "times", "map", "anchors", "mode", "origin", "keyframe-step",
-       "links", "first-window", "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
-      {"help", "force"});
+  const Args args(argc, argv,
+                  {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
+                   "keyframe-step", "links", "first-window", "min-window-keyframes",
+                   "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
+                  {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -211,6 +217,11 @@ int run_correct(int argc, char** argv) {
   if (first_window != "from-start" && first_window != "paper")
     throw UsageError("--first-window: '" + first_window + "' is not from-start or paper");
   opt.first_window_from_start = first_window == "from-start";
+  const long long min_window = args.get_int("min-window-keyframes", opt.min_window_keyframes);
+  if (min_window < 0 || min_window > 1000000)
+    throw UsageError("--min-window-keyframes must be an integer in [0, 1000000], not " +
+                     args.get("min-window-keyframes"));
+  opt.min_window_keyframes = static_cast<int>(min_window);
   opt.ba_min_parallax_deg = number_option(args, "ba-min-parallax", opt.ba_min_parallax_deg);
   opt.ba_cost_tolerance_sd = number_option(args, "ba-cost-tolerance-sd", opt.ba_cost_tolerance_sd);
   if (!(opt.ba_min_parallax_deg >= 0 && opt.ba_min_parallax_deg < 90))
@@ -472,6 +483,7 @@ int run_correct(int argc, char** argv) {
       << ", \"min_shared_points\": " << opt.min_shared_points
       << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px)
       << ", \"first_window\": " << io::detail::json_string(first_window)
+      << ", \"min_window_keyframes\": " << opt.min_window_keyframes
       << ", \"ba_min_parallax_deg\": " << json_num(opt.ba_min_parallax_deg)
       << ", \"ba_cost_tolerance_sd\": " << json_num(opt.ba_cost_tolerance_sd) << "}"
       << ",\n  \"counts\": {\"poses\": " << np << ", \"keyframes\": " << nk

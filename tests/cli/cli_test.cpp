@@ -166,6 +166,12 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     expect_failure(correct(good, "--ba-cost-tolerance-sd nan"),
                    {"--ba-cost-tolerance-sd", "not a finite number"});
     expect_failure(correct(good, "--first-window later"), {"--first-window", "later"});
+    expect_failure(correct(good, "--min-window-keyframes -1"),
+                   {"--min-window-keyframes", "[0, 1000000]"});
+    expect_failure(correct(good, "--min-window-keyframes 2000000"),
+                   {"--min-window-keyframes", "[0, 1000000]"});
+    expect_failure(correct(good, "--min-window-keyframes 30.5"),
+                   {"--min-window-keyframes", "not an integer"});
   }
   SECTION("an unknown option or mode") {
     const Run r = correct(good, "--bogus 1");
@@ -252,9 +258,12 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(rep.find("\"first_window\": \"from-start\"") != std::string::npos);
     REQUIRE(json_numbers(rep, "ba_min_parallax_deg").size() == 1);
     CHECK(json_numbers(rep, "ba_min_parallax_deg")[0] == Approx(1.146));
-    CHECK(json_numbers(rep, "ba_cost_tolerance_sd")[0] == Approx(0.1));
+    CHECK(json_numbers(rep, "ba_cost_tolerance_sd")[0] == Approx(1.0));
+    REQUIRE(json_numbers(rep, "min_window_keyframes").size() == 1);
+    CHECK(json_numbers(rep, "min_window_keyframes")[0] == 30);
     const Run c = run("correct " + in + " " + map +
                       " --first-window paper --ba-min-parallax 0 --ba-cost-tolerance-sd 1000"
+                      " --min-window-keyframes 0"
                       " --out " +
                       t.file("opts"));
     INFO(c.output);
@@ -263,6 +272,7 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(rep2.find("\"first_window\": \"paper\"") != std::string::npos);
     CHECK(json_numbers(rep2, "ba_min_parallax_deg")[0] == 0.0);
     CHECK(json_numbers(rep2, "ba_cost_tolerance_sd")[0] == 1000.0);
+    CHECK(json_numbers(rep2, "min_window_keyframes")[0] == 0);
     // Default: some BA window leaves low-parallax points out; with 0 none does.
     const auto skipped = json_numbers(rep, "skipped_points");
     const auto skipped2 = json_numbers(rep2, "skipped_points");
@@ -276,6 +286,19 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     REQUIRE(windows2.size() >= 2);
     CHECK(windows[1] == 0);
     CHECK(windows2[1] > 0);
+    // Anchors here are ~33 keyframes apart, so the default window (3 anchors) is longer than 30
+    // keyframes and later windows start after keyframe 0; a minimum length longer than the
+    // path lengthens every window back to the first keyframe.
+    CHECK(*std::max_element(windows.begin() + 1, windows.end()) > 0);
+    const Run w = run("correct " + in + " " + map + " --min-window-keyframes 1000000 --out " +
+                      t.file("longwin"));
+    INFO(w.output);
+    REQUIRE(w.code == 0);
+    const std::string rep3 = geodrift::test::read_text(t.file("longwin/report.json"));
+    CHECK(json_numbers(rep3, "min_window_keyframes")[0] == 1000000);
+    const auto windows3 = json_numbers(rep3, "window_keyframes");
+    REQUIRE(windows3.size() == windows.size());
+    CHECK(*std::max_element(windows3.begin() + 1, windows3.end()) == 0);
     // A tolerance of 1000 SD stops each BA at its first accepted step.
     int ba_steps = 0;
     for (auto p = rep2.find("{\"kind\": \"ba\""); p != std::string::npos;

@@ -190,3 +190,51 @@ TEST_CASE("Corrector validates the BA point and stopping options", "[correction]
   bad.ba_cost_tolerance_sd = -1;
   CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_cost_tolerance_sd"));
 }
+
+TEST_CASE("A badly localized geo view with its covariance pulls the window less", "[correction]") {
+  // Drift-free scene; the view of the anchor at keyframe 60 is localized 3 m to the side of
+  // its keyframe (its geo-tag is at the keyframe): a localization error the geo-tag's 5 cm
+  // cannot explain. With its covariance (3 m per axis) the Corrector weights its geo terms by
+  // sqrt(0.05² + 3²) m and the path stays in place; with the paper's weights the window is
+  // pulled towards the wrong centre.
+  ExactScene s = make_exact_scene(90, {10, 20, 30, 40, 60, 75, 89});
+  const double s_mw = 0.05;  // M units per metre (make_exact_scene)
+  const int bad = 4;         // the correspondence of keyframe 60
+  REQUIRE(s.corr[bad].keyframe == 60);
+  const Eigen::Vector3d c_vk(3.0 * s_mw, 0, 0);  // view centre in the keyframe frame, M units
+  s.corr[bad].T_vk = lie::SE3d(lie::SO3d(), -c_vk);
+  s.corr[bad].pose_cov.block<3, 3>(3, 3) = Eigen::Matrix3d::Identity() * std::pow(3.0 * s_mw, 2);
+  for (auto mode :
+       {correction::Mode::kInitPgo, correction::Mode::kInitBa, correction::Mode::kOurs}) {
+    double err[2];
+    for (bool weighted : {false, true}) {
+      correction::CorrectorOptions opt;
+      opt.mode = mode;
+      opt.weight_by_localization = weighted;
+      correction::Corrector c(opt);
+      feed(&c, s);
+      REQUIRE(c.initialized());
+      err[weighted] = mean_2d_error(c, s);
+      // The SD the geo terms use: the geo-tag's alone without weighting or covariance.
+      CHECK(c.geo_sd_m(0) == Approx(0.05));
+      CHECK(c.geo_sd_m(bad) ==
+            Approx(weighted ? std::sqrt(0.05 * 0.05 + 9.0) : 0.05).epsilon(0.02));
+      // In metres at the corrected scale (the unweighted run's bad view rescales the map).
+      if (weighted) CHECK(c.localization_sd_of(bad) == Approx(3.0).epsilon(0.02));
+    }
+    INFO("mode " << correction::to_string(mode) << ": mean 2D error paper weights " << err[0]
+                 << " m, weighted by localization " << err[1] << " m");
+    CHECK(err[0] > 0.05);
+    CHECK(err[1] < 0.25 * err[0]);
+  }
+}
+
+TEST_CASE("Corrector refuses a pose covariance with a negative variance", "[correction]") {
+  correction::Corrector c;
+  map::Keyframe k;
+  c.add_keyframe(k);
+  map::Correspondence corr;
+  corr.keyframe = k.id;
+  corr.pose_cov(4, 4) = -1;
+  CHECK_THROWS_WITH(c.add_correspondence(corr), Catch::Contains("negative variance"));
+}

@@ -1,6 +1,7 @@
 // PnP RANSAC + LM localization and the map-world correspondence, on synthetic 2D-3D data.
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <geodrift/correction/localization_covariance.hpp>
 #include <geodrift/geo/kitti.hpp>
 #include <geodrift/geotag/localize.hpp>
 #include <geodrift/geotag/panorama.hpp>
@@ -47,6 +48,7 @@ void make_scene(std::mt19937& rng, const lie::SE3d& T_cw, const map::Camera& cam
 TEST_CASE("PnP RANSAC + core LM localizes a view with 50% outliers", "[geotag][localize]") {
   std::mt19937 rng(42);
   const map::Camera cam = kitti_camera();
+  double err2 = 0, predicted2 = 0;  // centre error² and the predicted tr Σ_c, summed
   for (int trial = 0; trial < 20; ++trial) {
     const lie::SE3d T_true = test::random_pose(rng, 10.0);
     std::vector<Eigen::Vector3d> X;
@@ -61,6 +63,9 @@ TEST_CASE("PnP RANSAC + core LM localizes a view with 50% outliers", "[geotag][l
     const double dc = (r.T_vm.inverse().translation() - T_true.inverse().translation()).norm();
     CHECK(dc < 0.02);
     CHECK(rotation_angle_deg(r.T_vm, T_true) < 0.05);
+    REQUIRE(r.pose_cov.block<3, 3>(3, 3).trace() > 0);
+    err2 += dc * dc;
+    predicted2 += correction::center_covariance(r.pose_cov, r.T_vm).trace();
     CHECK(r.rms_px < 0.8);
     int wrong = 0;
     for (int i : r.inlier_indices) wrong += out[i] ? 1 : 0;
@@ -71,6 +76,11 @@ TEST_CASE("PnP RANSAC + core LM localizes a view with 50% outliers", "[geotag][l
     for (bool o : out) n_in += o ? 0 : 1;
     CHECK(r.inliers >= n_in - 2);
   }
+  // The pose covariance over the inliers predicts the centre errors: Σ dc² over 20 trials is a
+  // χ² with 60 degrees of freedom scaled by the mean tr Σ_c (95 % range 0.68-1.35 of it).
+  INFO("sum of centre errors² " << err2 << ", of predicted variances " << predicted2);
+  CHECK(err2 / predicted2 > 0.6);
+  CHECK(err2 / predicted2 < 1.5);
 }
 
 TEST_CASE("Localization rejects too few pairs, pure outliers and degenerate geometry cleanly",
@@ -181,6 +191,8 @@ TEST_CASE("A localized panorama view gives the correspondence of DESIGN.md, cons
   CHECK(c.inliers == r.inliers);
   CHECK(c.reprojection_rms == r.rms_px);
   CHECK(c.sigma_m == 2.0);
+  CHECK(c.pose_cov == r.pose_cov);
+  CHECK(c.has_pose_covariance());
   CHECK((c.y_w - p_w).norm() < 1e-6);
   // T_vk composes with the keyframe's pose to the view's pose in M.
   CHECK(test::pose_distance(c.T_vk * kf.T_cw, r.T_vm) < 1e-9);

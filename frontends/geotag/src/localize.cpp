@@ -6,6 +6,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include "geodrift/correction/localization_covariance.hpp"
 #include "geodrift/error.hpp"
 #include "geodrift/solver/levenberg_marquardt.hpp"
 #include "geodrift/solver/loss.hpp"
@@ -157,6 +158,16 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
     r.reason = "inliers cover too small a part of the image (degenerate geometry)";
     return r;
   }
+  {
+    std::vector<Eigen::Vector3d> Xi;
+    std::vector<Eigen::Vector2d> ui;
+    for (int i : idx) {
+      Xi.push_back(X_m[i]);
+      ui.push_back(uv[i]);
+    }
+    const correction::PnpCovariance cov = correction::pnp_pose_covariance(Xi, ui, cam, T);
+    if (cov.ok) r.pose_cov = cov.pose;
+  }
   r.ok = true;
   return r;
 }
@@ -177,6 +188,7 @@ map::Correspondence make_correspondence(int id, const GeoView& view, const map::
   c.geotag_id = view.tag.id;
   c.inliers = result.inliers;
   c.reprojection_rms = result.rms_px;
+  c.pose_cov = result.pose_cov;
   return c;
 }
 

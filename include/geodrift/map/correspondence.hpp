@@ -22,6 +22,14 @@ struct Correspondence {
   int geotag_id = -1;           ///< GeoTag::id, -1 when the anchor came without one
   int inliers = 0;              ///< PnP inlier count (0 for anchors read from a file)
   double reprojection_rms = 0;  ///< pixels
+  /// Covariance of the view's pose T_vw in M from its localization (PnP + LM: σ̂²·(JᵀJ)⁻¹ with
+  /// σ̂² the reprojection residual variance, correction::pnp_pose_covariance), tangent (ω, ν),
+  /// LEFT perturbation, rad² and M units². All zero when unknown (anchors read from a file, a
+  /// GNSS fix): the Corrector then weights the geo term by sigma_m alone.
+  Eigen::Matrix<double, 6, 6> pose_cov = Eigen::Matrix<double, 6, 6>::Zero();
+
+  /// True when pose_cov was filled in by the localization.
+  bool has_pose_covariance() const { return pose_cov.block<3, 3>(3, 3).trace() > 0; }
 };
 
 }  // namespace geodrift::map

@@ -809,6 +809,7 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
     c.geotag_id = f;
     c.inliers = static_cast<int>(Xi.size());
     c.reprojection_rms = pnp.rms_px;
+    if (pnp.covariance.ok) c.pose_cov = pnp.covariance.pose;
     v.localized = true;
     views.push_back(v);
   }

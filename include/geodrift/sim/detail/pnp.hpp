@@ -5,6 +5,7 @@
 #include <limits>
 #include <vector>
 
+#include "geodrift/correction/localization_covariance.hpp"
 #include "geodrift/error.hpp"
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/map/camera.hpp"
@@ -23,6 +24,9 @@ struct PnpResult {
   double rms_px = std::numeric_limits<double>::quiet_NaN();
   int iterations = 0;  ///< LM iterations (accepted + rejected steps)
   bool converged = false;
+  /// Gauss–Newton covariance of T_cw at the solution (correction::pnp_pose_covariance:
+  /// σ̂²·(JᵀJ)⁻¹, σ̂² the reprojection residual variance); ok = false when nothing was solved.
+  correction::PnpCovariance covariance;
 };
 
 /// Levenberg–Marquardt refinement of a camera pose from 3D–2D correspondences, minimising
@@ -61,6 +65,8 @@ inline PnpResult refine_pose_lm(const std::vector<Eigen::Vector3d>& X,
   res.converged = summary.converged();
   if (summary.termination != solver::Termination::kNonFiniteResidual)
     res.rms_px = std::sqrt(2.0 * summary.final_cost / static_cast<double>(points.size()));
+  if (std::isfinite(res.rms_px))
+    res.covariance = correction::pnp_pose_covariance(X, u, cam, res.T_cw);
   return res;
 }
 

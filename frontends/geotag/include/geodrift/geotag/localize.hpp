@@ -53,6 +53,10 @@ struct LocalizeResult {
   int inliers = 0;
   double rms_px = 0;
   std::vector<int> inlier_indices;  ///< into the input arrays
+  /// Covariance of T_vm over the final inliers (correction::pnp_pose_covariance: σ̂²·(JᵀJ)⁻¹,
+  /// tangent (ω, ν), M units); zero when it could not be computed. Passed on to the
+  /// Correspondence (pose_cov) by make_correspondence.
+  Eigen::Matrix<double, 6, 6> pose_cov = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
 /// Localizes a view from 2D-3D pairs (X_m[i] in M, uv[i] in view pixels).
