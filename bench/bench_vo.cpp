@@ -19,6 +19,7 @@
 #include "geodrift/render/render.hpp"
 #include "geodrift/render/world.hpp"
 #include "geodrift/vo/odometry.hpp"
+#include "support/kitti_camera.hpp"  // tests/support
 
 using namespace geodrift;
 
@@ -26,15 +27,7 @@ namespace {
 
 constexpr int kFrames = 150;
 
-map::Camera kitti_camera() {
-  map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
-}
+using test::kitti_camera;
 
 const std::vector<cv::Mat>& frames() {
   static const std::vector<cv::Mat> f = [] {
