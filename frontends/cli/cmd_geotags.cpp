@@ -211,6 +211,11 @@ int run_build(int argc, char** argv) {
     };
   const geotag::Database db = geotag::Database::build(sources, o);
   if (tty) std::fputc('\n', stderr);
+  if (db.views().size() > 1 && db.index().num_informative_words() == 0)
+    std::fprintf(stderr,
+                 "warning: every one of the %d visual words occurs in all %zu views, so retrieval "
+                 "cannot rank them; rebuild with a larger vocabulary (--branching, --depth)\n",
+                 db.vocabulary().num_words(), db.views().size());
   db.save(out);
   const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   int panos = 0;
@@ -260,7 +265,12 @@ int run_query(int argc, char** argv) {
                 db.sources()[v.source].path.c_str(), v.direction, heading, v.tag.latitude_deg,
                 v.tag.longitude_deg, v.tag.height);
   }
-  if (r.empty()) std::fprintf(stderr, "geodrift geotags query: no view shares a visual word\n");
+  if (r.empty())
+    std::fprintf(stderr, "geodrift geotags query: %s\n",
+                 db.index().num_informative_words() == 0
+                     ? "no visual word distinguishes the database's views (each occurs in all of "
+                       "them): rebuild it with a larger vocabulary (--branching, --depth)"
+                     : "no view shares a visual word with the image");
   return 0;
 }
 

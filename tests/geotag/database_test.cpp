@@ -188,3 +188,25 @@ TEST_CASE("Geo-tag CSVs with bad rows are refused naming the line", "[geotag][da
       geotag::read_geotag_csv(csv("black.csv", h + "0,black.png,49,8.4,160,90\n"), so);
   CHECK_THROWS_AS(geotag::Database::build(black, small_options()), Error);
 }
+
+TEST_CASE("The inverted file's idf: shared-by-all words carry no weight and are counted",
+          "[geotag][database]") {
+  // Three views over 4 words: word 0 in all of them, 1 in two, 2 in one, 3 in none.
+  const geotag::InvertedIndex ix({{0, 1, 2, 2}, {0, 1}, {0}}, 4);
+  CHECK(ix.idf(0) == 0.0);
+  CHECK(ix.idf(1) == Approx(std::log(3.0 / 2.0)));
+  CHECK(ix.idf(2) == Approx(std::log(3.0)));
+  CHECK(ix.idf(3) == 0.0);
+  CHECK(ix.num_informative_words() == 2);
+  // A query made of view 0's words scores view 0 highest; view 2 (only word 0) scores 0.
+  const std::vector<float> s = ix.scores(ix.vectorize({0, 1, 2, 2}));
+  REQUIRE(s.size() == 3);
+  CHECK(s[0] == Approx(1.0f));
+  CHECK(s[1] > 0.0f);
+  CHECK(s[1] < s[0]);
+  CHECK(s[2] == 0.0f);
+  // A vocabulary so coarse that every word is in every view cannot rank anything.
+  const geotag::InvertedIndex coarse({{0, 1}, {1, 0, 0}}, 2);
+  CHECK(coarse.num_informative_words() == 0);
+  for (float x : coarse.scores(coarse.vectorize({0, 1}))) CHECK(x == 0.0f);
+}

@@ -87,6 +87,13 @@ class InvertedIndex {
   int num_documents() const { return num_docs_; }
   /// idf(w) = log(N / n_w), n_w = documents containing w (0 for words never seen).
   double idf(int word) const { return idf_[word]; }
+  /// Words with idf > 0: seen in some but not all documents. Only they can rank documents; 0
+  /// means the vocabulary is too coarse for the database (every word in every view).
+  int num_informative_words() const {
+    int n = 0;
+    for (float f : idf_) n += f > 0 ? 1 : 0;
+    return n;
+  }
   /// The L2-normalised tf-idf vector of a word list under this index's idf.
   BowVector vectorize(const std::vector<int>& words) const;
   /// Cosine similarity of the query with every document (0 for documents sharing no word).
