@@ -16,12 +16,14 @@
 #include <geodrift/version.hpp>
 #include <geodrift/vo/input.hpp>
 #include <geodrift/vo/odometry.hpp>
+#include <limits>
 #include <map>
 #if defined(GEODRIFT_CLI_HAS_GEOTAG)
 #include <fstream>
 #include <geodrift/geotag/pipeline.hpp>
 #include <geodrift/io/csv.hpp>
 #include <geodrift/lie/sim3.hpp>
+#include <limits>
 #include <memory>
 #include <unordered_map>
 #endif
@@ -65,6 +67,8 @@ inputs
                       (default 1: every keyframe; keyframes are ~1 m apart on a car, geo-tags
                       often 5 m or more)
   --geotag-top-k K    views tried per keyframe once the gate is active (default 5)
+  --photo-hfov-deg D  horizontal field of view of geo-tagged photos whose CSV row has no
+                      fx..cy (default: from EXIF FocalLengthIn35mmFilm); --geotags folder only
 
 options
   --fps F             frame rate for timestamps of an image folder without times.txt (default 10)
@@ -97,10 +101,11 @@ std::string json_num(double v) {
 }  // namespace
 
 int run_run(int argc, char** argv) {
-  const Args args(argc, argv,
-                  {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every",
-                   "geotag-top-k", "fps", "max-frames", "features", "threads", "out"},
-                  {"help", "force"});
+  const Args args(
+      argc, argv,
+      {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every", "geotag-top-k",
+       "photo-hfov-deg", "fps", "max-frames", "features", "threads", "out"},
+      {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
     return 0;
@@ -120,6 +125,17 @@ int run_run(int argc, char** argv) {
   if (geo_every < 1) throw UsageError("--geotag-every must be >= 1");
   const long long geo_top_k = args.get_int("geotag-top-k", 5);
   if (geo_top_k < 1) throw UsageError("--geotag-top-k must be >= 1");
+  double photo_hfov_deg = std::numeric_limits<double>::quiet_NaN();
+  if (args.has("photo-hfov-deg")) {
+    photo_hfov_deg = parse_number_list("photo-hfov-deg", args.get("photo-hfov-deg")).at(0);
+    if (!(photo_hfov_deg > 1 && photo_hfov_deg < 179))
+      throw UsageError("--photo-hfov-deg must be in (1, 179) degrees");
+    std::error_code ec;
+    if (!args.has("geotags") || !std::filesystem::is_directory(args.get("geotags"), ec))
+      throw UsageError(
+          "--photo-hfov-deg applies to a --geotags folder (a database FILE has its views' "
+          "intrinsics already)");
+  }
   const double fps = args.has("fps") ? parse_number_list("fps", args.get("fps")).at(0) : 10.0;
   if (!(fps > 0)) throw UsageError("--fps must be > 0");
   const long long max_frames = args.get_int("max-frames", -1);
@@ -176,7 +192,9 @@ int run_run(int argc, char** argv) {
     const auto tg = std::chrono::steady_clock::now();
     if (std::filesystem::is_directory(g, ec)) {
       std::vector<std::string> skipped;
-      std::vector<geotag::GeoSource> sources = geotag::read_geotag_sources(g, {}, &skipped);
+      geotag::GeoSourceOptions so;
+      so.photo_hfov_deg = photo_hfov_deg;
+      std::vector<geotag::GeoSource> sources = geotag::read_geotag_sources(g, so, &skipped);
       for (const std::string& w : skipped)
         std::fprintf(stderr, "geodrift run: warning: --geotags: skipped %s\n", w.c_str());
       geotag::Database::BuildOptions bo;

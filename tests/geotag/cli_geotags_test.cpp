@@ -56,7 +56,8 @@ TEST_CASE("geotags CLI: usage and input errors exit non-zero with a message",
 TEST_CASE("run CLI: the geo-tag cost options are validated before any work",
           "[geotag][cli][errors]") {
   test::TempDir tmp;
-  for (const char* bad : {"--geotag-every 0", "--geotag-every -3", "--geotag-top-k 0"}) {
+  for (const char* bad : {"--geotag-every 0", "--geotag-every -3", "--geotag-top-k 0",
+                          "--photo-hfov-deg 0", "--photo-hfov-deg 180", "--photo-hfov-deg nan"}) {
     const Run r = run("run --images " + tmp.path().string() + " --geotags " + tmp.path().string() +
                       " " + bad + " --out " + tmp.file("out"));
     INFO(bad << ": " << r.output);
@@ -65,6 +66,14 @@ TEST_CASE("run CLI: the geo-tag cost options are validated before any work",
           std::string::npos);
   }
   CHECK(tmp.num_entries() == 0);
+  // A database file already holds the views' intrinsics: a field of view for it is refused.
+  test::write_text(tmp.file("some.gdb"), "not read");
+  const Run r = run("run --images " + tmp.path().string() + " --geotags " + tmp.file("some.gdb") +
+                    " --photo-hfov-deg 60 --out " + tmp.file("out"));
+  INFO(r.output);
+  CHECK(r.code == 2);
+  CHECK(r.output.find("--geotags folder") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(tmp.file("out")));
 }
 
 TEST_CASE("geotags CLI: build on the Lund photos and query one of them", "[geotag][cli][data]") {
