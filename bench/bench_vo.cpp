@@ -19,7 +19,7 @@
 #include "geodrift/render/render.hpp"
 #include "geodrift/render/world.hpp"
 #include "geodrift/vo/odometry.hpp"
-#include "support/kitti_camera.hpp"  // tests/support
+#include "support/kitti.hpp"  // tests/support
 
 using namespace geodrift;
 
@@ -43,14 +43,8 @@ const std::vector<cv::Mat>& frames() {
       if (static_cast<int>(out.size()) == kFrames) return out;
       out.clear();
     }
-    const io::Trajectory tr =
-        io::read_trajectory(std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt/poses/02.txt");
-    std::vector<Eigen::Isometry3d> T_K_c;
-    for (const auto& p : tr.poses) {
-      Eigen::Isometry3d T;
-      T.matrix() = p.T_cw.inverse().matrix();
-      T_K_c.push_back(T);
-    }
+    const std::vector<Eigen::Isometry3d> T_K_c =
+        test::kitti_T_K_c(std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt/poses/02.txt");
     render::WorldOptions wo;
     wo.last_frame = kFrames - 1;
     const render::World world = render::World::from_kitti(T_K_c, wo);

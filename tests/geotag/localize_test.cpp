@@ -9,7 +9,7 @@
 #include <geodrift/lie/sim3.hpp>
 #include <random>
 
-#include "support/kitti_camera.hpp"
+#include "support/kitti.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;

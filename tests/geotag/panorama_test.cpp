@@ -5,7 +5,7 @@
 #include <geodrift/geotag/panorama.hpp>
 #include <opencv2/core.hpp>
 
-#include "support/kitti_camera.hpp"
+#include "support/kitti.hpp"
 
 using namespace geodrift;
 

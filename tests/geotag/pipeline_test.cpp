@@ -12,7 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "support/kitti_camera.hpp"
+#include "support/kitti.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;

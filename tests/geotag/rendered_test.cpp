@@ -26,7 +26,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "support/kitti_camera.hpp"
+#include "support/kitti.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -99,16 +99,7 @@ const geotag::Database& database() {
 
 TEST_CASE("Rendered: a panorama's cut view equals the pinhole render of the same direction",
           "[geotag][rendered][slow]") {
-  std::vector<Eigen::Isometry3d> T_K_c;
-  for (const io::TrajectoryPose& p :
-       io::read_trajectory(kitti_file("poses/02.txt"), io::TrajectoryFormat::kKitti).poses) {
-    if (static_cast<int>(T_K_c.size()) > 60) break;
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    const lie::SE3d T_wc = p.T_cw.inverse();
-    T.linear() = T_wc.rotation().matrix();
-    T.translation() = T_wc.translation();
-    T_K_c.push_back(T);
-  }
+  const std::vector<Eigen::Isometry3d> T_K_c = test::kitti_T_K_c(kitti_file("poses/02.txt"), 61);
   render::WorldOptions wo;
   wo.last_frame = 60;
   const render::World world = render::World::from_kitti(T_K_c, wo);

@@ -109,6 +109,7 @@ TEST_CASE("VO tracks a synthetic corridor drive and streams every keyframe once,
 #include "geodrift/io/trajectory.hpp"
 #include "geodrift/render/render.hpp"
 #include "geodrift/render/world.hpp"
+#include "support/kitti.hpp"
 
 TEST_CASE("VO on rendered KITTI 02 frames: >= 95 % tracked, < 1 % drift over 100 m",
           "[vo][slow][data]") {
@@ -120,23 +121,12 @@ TEST_CASE("VO on rendered KITTI 02 frames: >= 95 % tracked, < 1 % drift over 100
   // 300 frames (about 290 m) in full runs; the CI form keeps 120 frames (> 100 m, so there are
   // 100 m segments to score).
   const int n = reduced() ? 120 : 300;
-  const io::Trajectory tr = io::read_trajectory(poses);
-  std::vector<Eigen::Isometry3d> T_K_c;
-  for (const auto& p : tr.poses) {
-    Eigen::Isometry3d T;
-    T.matrix() = p.T_cw.inverse().matrix();
-    T_K_c.push_back(T);
-  }
+  const std::vector<Eigen::Isometry3d> T_K_c = test::kitti_T_K_c(poses);
   render::WorldOptions wo;
   wo.first_frame = 0;
   wo.last_frame = n - 1;
   const render::World world = render::World::from_kitti(T_K_c, wo);
-  map::Camera cam;  // KITTI 00-02 cam0
-  cam.fx = cam.fy = 718.856;
-  cam.cx = 607.1928;
-  cam.cy = 185.2157;
-  cam.width = 1241;
-  cam.height = 376;
+  const map::Camera cam = test::kitti_camera();
   std::vector<Eigen::Isometry3d> gt;
   for (int i = 0; i < n; ++i) {
     Eigen::Isometry3d G;
