@@ -292,6 +292,85 @@ void BM_Floor_Sim3Drift(benchmark::State& state) {
   }
 }
 
+// ---- geodesic acceleration and the initial damping (Options::geodesic_acceleration) --------
+/// λ0 = 1e-8 on both sides (Ceres: initial trust-region radius 1e8): the drift graph's first
+/// iterations are limited by λ0 = 1e-4 (its soft directions, fixed by 1 m priors against 1e5
+/// edges, are damped ~60x), so the low-damping rows show each solver with that limit removed.
+constexpr double kLowDampingLambda = 1e-8;
+solver::Options accel_options(solver::LinearSolverType type, int threads, double lambda0) {
+  solver::Options o = our_options(type, threads);
+  o.geodesic_acceleration = true;
+  o.initial_lambda = lambda0;
+  return o;
+}
+template <typename Make>
+void drift_variant(benchmark::State& state, const char* kind, solver::Options o, Make make) {
+  const int n = static_cast<int>(state.range(0));
+  o.num_threads = static_cast<int>(state.range(1));
+  run_ours(state, key(kind, std::to_string(n), o.num_threads), make, [o](gb::OurDriftGraph* p) {
+    solver::LevenbergMarquardt lm(o);
+    return lm.solve(&p->problem);
+  });
+}
+void BM_Sim3Drift_OursAccel(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  drift_variant(state, "drift", accel_options(solver::LinearSolverType::kAuto, 1, 1e-4),
+                [n] { return std::make_unique<gb::OurDriftGraph>(drift(n)); });
+}
+void BM_Sim3Drift_OursLowDamping(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  solver::Options o = our_options(solver::LinearSolverType::kAuto, 1);
+  o.initial_lambda = kLowDampingLambda;
+  drift_variant(state, "drift-low-damping", o,
+                [n] { return std::make_unique<gb::OurDriftGraph>(drift(n)); });
+}
+void BM_Sim3Drift_OursAccelLowDamping(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  drift_variant(state, "drift-low-damping",
+                accel_options(solver::LinearSolverType::kAuto, 1, kLowDampingLambda),
+                [n] { return std::make_unique<gb::OurDriftGraph>(drift(n)); });
+}
+void BM_Sim3Drift_OursAccelLowDampingCholmod(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  drift_variant(state, "drift-low-damping",
+                accel_options(solver::LinearSolverType::kCholmod, 1, kLowDampingLambda),
+                [n] { return std::make_unique<gb::OurDriftGraph>(drift(n)); });
+}
+#if GEODRIFT_HAVE_CERES
+void BM_Sim3Drift_CeresLowDamping(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0)), threads = static_cast<int>(state.range(1));
+  ceres::Solver::Options o =
+      gb::ceres_lm_options(ceres::SPARSE_NORMAL_CHOLESKY, threads, kMaxIterations,
+                           kFunctionTolerance, kGradientTolerance, kParameterTolerance);
+  o.initial_trust_region_radius = 1.0 / kLowDampingLambda;
+  run_ceres(
+      state, key("drift-low-damping", std::to_string(n), threads),
+      [&] { return std::make_unique<gb::CeresDriftGraph>(drift(n), drift(n).initial); }, o);
+}
+#endif
+void BM_Se3Graph_OursAccel(benchmark::State& state) {
+  const int g = static_cast<int>(state.range(0)), threads = static_cast<int>(state.range(1));
+  run_ours(
+      state, key("se3", kGraphs[g], threads),
+      [&] { return std::make_unique<gb::OurSe3Graph>(graph(g)); },
+      [&](gb::OurSe3Graph* p) {
+        solver::LevenbergMarquardt lm(
+            accel_options(solver::LinearSolverType::kAuto, threads, 1e-4));
+        return lm.solve(&p->problem);
+      });
+}
+void BM_Ba_OursAccel(benchmark::State& state) {
+  const int which = static_cast<int>(state.range(0)), threads = static_cast<int>(state.range(1));
+  run_ours(
+      state, key("ba", ba_name(which), threads),
+      [&] { return std::make_unique<gb::OurBa>(ba(which)); },
+      [&](gb::OurBa* p) {
+        solver::LevenbergMarquardt lm(
+            accel_options(solver::LinearSolverType::kSchur, threads, 1e-4));
+        return lm.solve(&p->problem);
+      });
+}
+
 // ---- bundle adjustment -----------------------------------------------------------------------
 void BM_Ba_Ours(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0)), threads = static_cast<int>(state.range(1));
@@ -364,6 +443,11 @@ BENCHMARK(BM_Se3Graph_Ours)
     ->UseManualTime()
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Se3Graph_OursAccel)
+    ->Apply(graph_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Floor_Se3Graph)
     ->DenseRange(0, 3)
     ->ArgName("graph")
@@ -387,6 +471,33 @@ BENCHMARK(BM_Sim3Drift_OursCholmod)
     ->UseManualTime()
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Sim3Drift_OursAccel)
+    ->Apply(drift_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+#if GEODRIFT_HAVE_CERES
+BENCHMARK(BM_Sim3Drift_CeresLowDamping)
+    ->Apply(drift_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+#endif
+BENCHMARK(BM_Sim3Drift_OursLowDamping)
+    ->Apply(drift_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Sim3Drift_OursAccelLowDamping)
+    ->Apply(drift_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Sim3Drift_OursAccelLowDampingCholmod)
+    ->Apply(drift_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Floor_Sim3Drift)
     ->Arg(1000)
     ->Arg(10000)
@@ -403,6 +514,11 @@ BENCHMARK(BM_Ba_Ceres)
     ->Unit(benchmark::kMillisecond);
 #endif
 BENCHMARK(BM_Ba_Ours)
+    ->Apply(ba_args)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Ba_OursAccel)
     ->Apply(ba_args)
     ->UseManualTime()
     ->Iterations(1)

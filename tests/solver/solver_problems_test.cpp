@@ -642,3 +642,248 @@ TEST_CASE("One LevenbergMarquardt reuses its symbolic analysis across problems o
       CHECK((a.points[j] - b.points[j]).norm() < 1e-9 * (1.0 + b.points[j].norm()));
   }
 }
+
+namespace {
+
+/// Geodesic-acceleration right-hand side from assembled Jacobians, block by block: `plain` holds
+/// the same blocks without loss (its evaluate_jacobian gives e = W·r and W·J), `loss` is the
+/// tested problem's loss, m the rows of every block. rhs = Σ J̃ᵀ·(2/h)·(C·(e_h − e)/h − J̃·v),
+/// C the Triggs corrector at e (identity without a loss), J̃ = C·W·J.
+Eigen::VectorXd reference_acceleration(Problem* plain, const RobustLoss& loss, int m,
+                                       const Eigen::VectorXd& v, double h) {
+  Eigen::SparseMatrix<double> Js, Jh;
+  Eigen::VectorXd e, eh;
+  REQUIRE(plain->evaluate_jacobian(&Js, &e));
+  const Eigen::VectorXd hv = h * v;
+  plain->save_state();
+  plain->plus(hv.data());
+  REQUIRE(plain->evaluate_jacobian(&Jh, &eh));
+  plain->restore_state();
+  const Eigen::MatrixXd J = Js;
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(v.size());
+  for (int k = 0; k * m < e.size(); ++k) {
+    Eigen::VectorXd ek = e.segment(k * m, m);
+    Eigen::VectorXd de = (eh.segment(k * m, m) - ek) / h;
+    Eigen::MatrixXd Jk = J.middleRows(k * m, m);
+    if (!loss.is_trivial()) {
+      double rho[3];
+      const double s = ek.squaredNorm();
+      loss.evaluate(s, rho);
+      const solver::TriggsCorrector C(s, rho);
+      C.correct_jacobian(ek, Jk);
+      C.correct_jacobian(ek, de);
+    }
+    rhs += Jk.transpose() * ((2.0 / h) * (de - Jk * v));
+  }
+  return rhs;
+}
+
+/// acceleration_rhs() of p after a linearisation into slot 0, along v.
+Eigen::VectorXd library_acceleration(Problem* p, const Eigen::VectorXd& v, double h) {
+  p->finalize(p->has_schur_ordering());
+  p->reserve_acceleration(true);
+  solver::BlockSparseMatrix H;
+  H.reset(&p->structure());
+  Eigen::VectorXd g(p->num_effective_parameters()), rhs(p->num_effective_parameters());
+  solver::LinearizeTimes lt;
+  double cost = 0.0;
+  REQUIRE(p->linearize(&H, g.data(), &cost, &lt, nullptr, 0));
+  REQUIRE(p->acceleration_rhs(v.data(), h, 0, rhs.data()));
+  return rhs;
+}
+
+Eigen::VectorXd random_step(int n, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> d(0.0, scale);
+  Eigen::VectorXd v(n);
+  for (int c = 0; c < n; ++c) v[c] = d(rng);
+  return v;
+}
+
+double relative_difference(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  return (a - b).lpNorm<Eigen::Infinity>() / std::max(1e-300, b.lpNorm<Eigen::Infinity>());
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE(
+    "Geodesic acceleration right-hand side equals J̃ᵀ·r̃'' from the assembled "
+    "Jacobian",
+    "[solver][acceleration]", lie::SE3d, lie::Sim3d) {
+  // Pose graph with a 6/7-dof information matrix (the container's sqrt-information table),
+  // without and with a Cauchy loss, one and two threads; BA (SE3 + R³, two constant cameras)
+  // with Huber through the Schur ordering.
+  const double h = 0.1;
+  for (const RobustLoss& loss : {RobustLoss(), RobustLoss::cauchy(0.5)}) {
+    PoseGraph<TestType> a(30, 0.02, 41), b(30, 0.02, 41);
+    Problem pa, pb;
+    a.build(&pa, loss);
+    b.build(&pb);
+    pa.finalize();
+    const Eigen::VectorXd v = random_step(pa.num_effective_parameters(), 0.02, 5);
+    const Eigen::VectorXd ref = reference_acceleration(&pb, loss, TestType::kDoF, v, h);
+    const Eigen::VectorXd got = library_acceleration(&pa, v, h);
+    INFO("loss trivial " << loss.is_trivial() << " |ref| " << ref.lpNorm<Eigen::Infinity>());
+    CHECK(ref.lpNorm<Eigen::Infinity>() > 1e-3);  // a curved problem: not a vacuous check
+    CHECK(relative_difference(got, ref) < 1e-9);
+    pa.set_num_threads(2);
+    const Eigen::VectorXd got2 = library_acceleration(&pa, v, h);
+    CHECK(relative_difference(got2, got) < 1e-13);
+    // The states are back where they were, bit for bit.
+    for (std::size_t k = 0; k < a.poses.size(); ++k) {
+      CHECK(a.poses[k].translation() == b.poses[k].translation());
+      CHECK(a.poses[k].rotation().quaternion().coeffs() ==
+            b.poses[k].rotation().quaternion().coeffs());
+    }
+  }
+}
+
+TEST_CASE("Geodesic acceleration right-hand side for BA with Huber and constant cameras",
+          "[solver][acceleration]") {
+  const double h = 0.1;
+  BaScene a(6, 40, 23), b(6, 40, 23);
+  Problem pa, pb;
+  a.build(&pa, RobustLoss::huber(0.5));  // 0.5 px noise: some residuals are beyond 0.5
+  b.build(&pb, RobustLoss());
+  pa.finalize(true);
+  pb.finalize(true);
+  const int n = pa.num_effective_parameters();
+  const Eigen::VectorXd v = random_step(n, 0.01, 9);
+  const Eigen::VectorXd ref = reference_acceleration(&pb, RobustLoss::huber(0.5), 2, v, h);
+  const Eigen::VectorXd got = library_acceleration(&pa, v, h);
+  CHECK(ref.lpNorm<Eigen::Infinity>() > 1e-3);
+  CHECK(relative_difference(got, ref) < 1e-9);
+}
+
+namespace {
+
+/// A monocular-drift Sim(3) chain (the bench_solver drift graph in small): keyframes every
+/// 1.5 m along straight blocks with 90° turns, VO odometry whose translation scale follows a
+/// log random walk (sd `drift` per keyframe), edges to the next 4 keyframes (weight 1e4), a 1 m
+/// camera-centre prior every 50 keyframes. States start at the chained odometry.
+struct DriftChain {
+  std::vector<lie::Sim3d> truth, S;
+  explicit DriftChain(int n, double drift, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> N(0.0, 1.0);
+    Eigen::Vector3d c(0, 0, 0);
+    double heading = 0.0;
+    for (int k = 0; k < n; ++k) {
+      if (k > 0 && k % 80 == 0) heading += (N(rng) > 0 ? 1.0 : -1.0) * M_PI / 2;
+      c += 1.5 * Eigen::Vector3d(std::cos(heading), std::sin(heading), 0.0);
+      // camera z forward along the heading, y down
+      Eigen::Matrix3d R_wc;
+      R_wc.col(2) = Eigen::Vector3d(std::cos(heading), std::sin(heading), 0.0);
+      R_wc.col(1) = Eigen::Vector3d(0, 0, -1);
+      R_wc.col(0) = R_wc.col(1).cross(R_wc.col(2));
+      const lie::SE3d T_cw = lie::SE3d(lie::SO3d(Eigen::Quaterniond(R_wc)), c).inverse();
+      truth.emplace_back(T_cw.rotation(), T_cw.translation(), 1.0);
+    }
+    S.push_back(truth[0]);
+    double log_scale = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      log_scale += drift * N(rng);
+      lie::Sim3d d = truth[k + 1] * truth[k].inverse();
+      d = lie::Sim3d(d.rotation(), std::exp(log_scale) * d.translation(), 1.0);
+      const Eigen::Vector3d w(N(rng), N(rng), N(rng));
+      d = lie::Sim3d(lie::SO3d::exp(5e-4 * w) * d.rotation(), d.translation(), 1.0);
+      S.push_back(d * S.back());
+    }
+  }
+  void build(Problem* p) {
+    const int n = static_cast<int>(S.size());
+    for (int i = 0; i < n; ++i)
+      for (int j = i + 1; j <= std::min(n - 1, i + 4); ++j)
+        p->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{S[j] * S[i].inverse()},
+                              RobustLoss(), 1e4, &S[i], &S[j]);
+    for (int i = 0; i < n; i += 50) {
+      solver::CameraCentrePriorResidual<lie::Sim3d> f;
+      f.y = truth[i].inverse().translation();
+      p->add_residual_block(f, RobustLoss(), 1.0, &S[i]);
+    }
+  }
+};
+
+/// First iteration whose cost is within rel of `target`.
+int iterations_to_reach(const solver::Summary& s, double target, double rel) {
+  for (const auto& r : s.trace)
+    if (r.cost <= (1.0 + rel) * target) return r.iteration;
+  return -1;
+}
+
+}  // namespace
+
+TEST_CASE("Geodesic acceleration reaches the same optima, sooner on a drifting Sim3 chain",
+          "[solver][acceleration]") {
+  // Same optimum with and without: a noisy Sim3 loop graph with Cauchy (block Cholesky) and BA
+  // with Huber (Schur).
+  {
+    PoseGraph<lie::Sim3d> a(50, 0.01, 29), b(50, 0.01, 29);
+    Problem pa, pb;
+    a.build(&pa, RobustLoss::cauchy(1.0));
+    b.build(&pb, RobustLoss::cauchy(1.0));
+    Options oa = tight(LinearSolverType::kAuto), ob = oa;
+    ob.geodesic_acceleration = true;
+    LevenbergMarquardt lma(oa), lmb(ob);
+    const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+    INFO(sa.brief_report() << "\n" << sb.brief_report());
+    CHECK(sb.converged());
+    CHECK(sb.accelerated_steps > 0);
+    CHECK(sb.final_cost == Approx(sa.final_cost).epsilon(1e-10));
+    CHECK(max_pose_error(a.poses, b.poses) < 1e-8);
+  }
+  {
+    BaScene a(6, 60, 51), b(6, 60, 51);
+    Problem pa, pb;
+    a.build(&pa, RobustLoss::huber(1.0));
+    b.build(&pb, RobustLoss::huber(1.0));
+    Options oa = tight(LinearSolverType::kSchur), ob = oa;
+    ob.geodesic_acceleration = true;
+    LevenbergMarquardt lma(oa), lmb(ob);
+    const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+    INFO(sa.brief_report() << "\n" << sb.brief_report());
+    CHECK(sb.converged());
+    CHECK(sb.final_cost == Approx(sa.final_cost).epsilon(1e-10));
+    for (std::size_t j = 0; j < a.points.size(); ++j)
+      CHECK((a.points[j] - b.points[j]).norm() < 1e-8 * (1.0 + a.points[j].norm()));
+  }
+  // The drifting chain: 600 keyframes, log-scale random walk of 2 % per keyframe (1.5 m):
+  // the curved valley the acceleration is for. Both start at λ0 = 1e-8 (no damping-limited
+  // start), one and two threads.
+  for (int threads : {1, 2}) {
+    DriftChain a(600, 0.02, 3), b(600, 0.02, 3);
+    Problem pa, pb;
+    a.build(&pa);
+    b.build(&pb);
+    Options oa;
+    oa.initial_lambda = 1e-8;
+    oa.num_threads = threads;
+    Options ob = oa;
+    ob.geodesic_acceleration = true;
+    LevenbergMarquardt lma(oa), lmb(ob);
+    const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+    INFO(sa.brief_report() << "\n" << sb.brief_report());
+    REQUIRE(sa.converged());
+    REQUIRE(sb.converged());
+    CHECK(sb.final_cost == Approx(sa.final_cost).epsilon(1e-6));
+    CHECK(sa.initial_cost > 50.0 * sa.final_cost);  // far from the optimum at the start
+    const double target = std::min(sa.final_cost, sb.final_cost);
+    const int ia = iterations_to_reach(sa, target, 1e-3),
+              ib = iterations_to_reach(sb, target, 1e-3);
+    INFO("iterations to within 0.1 %: plain " << ia << ", accelerated " << ib);
+    CHECK(ib >= 1);
+    CHECK(ib < ia);
+  }
+}
+
+TEST_CASE("Geodesic acceleration options are validated", "[solver][acceleration]") {
+  std::string why;
+  Options o;
+  o.acceleration_step = 0.0;
+  CHECK_FALSE(o.validate(&why));
+  CHECK_THAT(why, Catch::Contains("acceleration_step"));
+  o = Options();
+  o.max_acceleration_ratio = std::numeric_limits<double>::quiet_NaN();
+  CHECK_FALSE(o.validate(&why));
+  CHECK_THAT(why, Catch::Contains("max_acceleration_ratio"));
+}

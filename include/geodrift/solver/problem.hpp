@@ -238,6 +238,17 @@ class ResidualContainerBase {
   /// central differences (step h, left retraction of each free parameter, states restored):
   /// returns the worst elementwise |J − J_num| / (1 + |J_num|), or +inf if unevaluable.
   virtual double jacobian_error(int k, double h) const = 0;
+  /// Geodesic acceleration, two passes over the blocks idx[0..count): store_residuals() keeps
+  /// each block's W·r at the current (perturbed) states, acceleration() then adds J̃ᵀ·r̃''_v at
+  /// the unperturbed states (ResidualBlock::accumulate_acceleration).
+  virtual bool store_residuals(const int* idx, int count, int* failed) = 0;
+  /// While ≥ 0, linearize() keeps every block's W·r and corrected J̃ in this slot (0 or 1),
+  /// which acceleration(…, slot) reads.
+  int store_slot = -1;
+  virtual void reserve_acceleration() = 0;
+  virtual void release_acceleration() = 0;
+  virtual bool acceleration(const int* idx, int count, const double* v, double h, int slot,
+                            double* rhs, int* failed) const = 0;
 };
 
 template <typename Functor, typename... Params>
@@ -309,7 +320,15 @@ class ResidualContainer final : public ResidualContainerBase {
     for (int k = 0; k < count; ++k) {
       const Block& b = blocks[idx[k]];
       double ck;
-      if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J)) {
+      if (store_slot >= 0) {  // geodesic acceleration: keep W·r and J̃ of this point
+        const std::size_t i = static_cast<std::size_t>(idx[k]);
+        if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J, &stored_e_[store_slot][i])) {
+          *failed = idx[k];
+          ok = false;
+          break;
+        }
+        stored_J_[store_slot][i] = J;
+      } else if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J)) {
         *failed = idx[k];
         ok = false;
         break;
@@ -320,6 +339,40 @@ class ResidualContainer final : public ResidualContainerBase {
     times->evaluate += std::chrono::duration<double>(Clock::now() - t0).count();
     if (ok) *cost += c;
     return ok;
+  }
+
+  bool store_residuals(const int* idx, int count, int* failed) override {
+    for (int k = 0; k < count; ++k) {
+      const std::size_t i = static_cast<std::size_t>(idx[k]);
+      if (!blocks[i].weighted_residual(sqrt_infos.data(), &stored_h_[i])) {
+        *failed = idx[k];
+        return false;
+      }
+    }
+    return true;
+  }
+  bool acceleration(const int* idx, int count, const double* v, double h, int slot, double* rhs,
+                    int* failed) const override {
+    for (int k = 0; k < count; ++k) {
+      const std::size_t i = static_cast<std::size_t>(idx[k]);
+      if (!blocks[i].accumulate_acceleration(stored_e_[slot][i], stored_J_[slot][i], stored_h_[i],
+                                             v, h, rhs)) {
+        *failed = idx[k];
+        return false;
+      }
+    }
+    return true;
+  }
+  /// Sizes the acceleration stores (2 slots of W·r and J̃, one of W·r at x ⊞ h·v).
+  void reserve_acceleration() override {
+    for (auto& e : stored_e_) e.resize(blocks.size());
+    for (auto& j : stored_J_) j.resize(blocks.size());
+    stored_h_.resize(blocks.size());
+  }
+  void release_acceleration() override {
+    for (auto& e : stored_e_) std::remove_reference_t<decltype(e)>().swap(e);
+    for (auto& j : stored_J_) std::remove_reference_t<decltype(j)>().swap(j);
+    std::remove_reference_t<decltype(stored_h_)>().swap(stored_h_);
   }
 
   void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo, int* hi) const override {
@@ -404,6 +457,12 @@ class ResidualContainer final : public ResidualContainerBase {
   }
 
  private:
+  /// Geodesic acceleration stores: W·r and J̃ per block for 2 linearisation points (the
+  /// current one and the speculative trial), W·r at x ⊞ h·v.
+  mutable std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_e_[2];
+  mutable std::vector<Jacobians, Eigen::aligned_allocator<Jacobians>> stored_J_[2];
+  std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_h_;
+
   template <std::size_t... I>
   static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
     return b.functor()(
@@ -537,7 +596,11 @@ class Problem {
     }
     structure_ = std::make_unique<BlockStructure>();
     structure_->build(sizes, std::move(couplings), num_elim);
-    for (auto& c : containers_) c->finalize(params_, *structure_);
+    for (auto& c : containers_) {
+      c->finalize(params_, *structure_);
+      c->release_acceleration();
+    }
+    acceleration_reserved_ = false;
     partition();
     row_.assign(order_.size() + 1, 0);
     for (std::size_t i = 0; i < order_.size(); ++i)
@@ -635,9 +698,24 @@ class Problem {
   /// structure()) and g = J̃ᵀr̃ (J̃, r̃: weighted, Triggs-corrected). H and g are overwritten.
   /// @param g num_effective_parameters() doubles.
   /// @param times accumulates the calling thread's evaluation and assembly time.
+  /// @param store_slot ≥ 0 (0 or 1, after reserve_acceleration()): also keep every block's
+  ///        W·r and J̃ in that slot for acceleration_rhs().
   bool linearize(BlockSparseMatrix* H, double* g, double* cost, LinearizeTimes* times,
-                 EvaluationError* error = nullptr) const {
+                 EvaluationError* error = nullptr, int store_slot = -1) const {
     GEODRIFT_CHECK(finalized_, "Problem::linearize() before finalize()");
+    GEODRIFT_CHECK(
+        store_slot < 0 || (store_slot < 2 && acceleration_reserved_),
+        "Problem::linearize(): store_slot " << store_slot << " without reserve_acceleration()");
+    struct SlotGuard {
+      const std::vector<std::unique_ptr<detail::ResidualContainerBase>>& cs;
+      SlotGuard(const std::vector<std::unique_ptr<detail::ResidualContainerBase>>& c, int slot)
+          : cs(c) {
+        for (auto& x : cs) x->store_slot = slot;
+      }
+      ~SlotGuard() {
+        for (auto& x : cs) x->store_slot = -1;
+      }
+    } guard(containers_, store_slot);
     const auto tz = std::chrono::steady_clock::now();
     H->set_zero();
     std::fill(g, g + structure_->num_cols(), 0.0);
@@ -755,6 +833,58 @@ class Problem {
     return true;
   }
 
+  /// Allocates (true) or frees (false) the geodesic-acceleration stores: per residual block
+  /// W·r and J̃ for two linearisation points and W·r at x ⊞ h·v (about 2·(m·n_J + m) doubles
+  /// for m residual rows and n_J Jacobian columns per block: 2 × 98 + 21 doubles for a Sim(3)
+  /// edge). Dropped by finalize().
+  void reserve_acceleration(bool on) {
+    GEODRIFT_CHECK(finalized_, "Problem::reserve_acceleration() before finalize()");
+    for (auto& c : containers_) {
+      if (on)
+        c->reserve_acceleration();
+      else
+        c->release_acceleration();
+    }
+    acceleration_reserved_ = on;
+  }
+
+  /// Geodesic acceleration right-hand side rhs = J̃ᵀ·r̃''_v at the point last linearised with
+  /// store_slot = slot (the current states; see ResidualBlock::accumulate_acceleration). The
+  /// states are moved to x ⊞ h·v for one residual-only pass and restored (through the
+  /// save_state() buffers). rhs: num_effective_parameters() doubles, overwritten. With 2
+  /// threads the blocks are split as in linearize(). @return false if a block cannot be
+  /// evaluated at x ⊞ h·v or a value is not finite.
+  bool acceleration_rhs(const double* v, double h, int slot, double* rhs) {
+    GEODRIFT_CHECK(finalized_ && acceleration_reserved_ && slot >= 0 && slot < 2,
+                   "Problem::acceleration_rhs() needs reserve_acceleration(true) and slot 0/1");
+    const int n = structure_->num_cols();
+    accel_step_.resize(static_cast<std::size_t>(n));
+    for (int c = 0; c < n; ++c) accel_step_[static_cast<std::size_t>(c)] = h * v[c];
+    save_state();
+    plus(accel_step_.data());
+    bool ok = for_parts(
+        [](detail::ResidualContainerBase& c, const std::vector<int>& l, double*) {
+          int failed = -1;
+          return c.store_residuals(l.data(), static_cast<int>(l.size()), &failed);
+        },
+        nullptr, nullptr);
+    restore_state();
+    if (!ok) return false;
+    std::fill(rhs, rhs + n, 0.0);
+    const bool two = num_threads_ == 2 && worker_;
+    if (two) accel_buffer_.assign(static_cast<std::size_t>(n), 0.0);
+    ok = for_parts(
+        [v, h, slot](detail::ResidualContainerBase& c, const std::vector<int>& l, double* out) {
+          int failed = -1;
+          return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, slot, out, &failed);
+        },
+        rhs, two ? accel_buffer_.data() : nullptr);
+    if (!ok) return false;
+    if (two)
+      for (int c = 0; c < n; ++c) rhs[c] += accel_buffer_[static_cast<std::size_t>(c)];
+    return true;
+  }
+
   /// x ← x ⊞ delta for every free block (delta: num_effective_parameters() doubles, in column
   /// order).
   void plus(const double* delta) {
@@ -854,6 +984,36 @@ class Problem {
     }
   }
 
+  /// Runs f(container, work list, out) over every container's work lists: part 0 (and, with
+  /// 2 threads, part 1 on the worker with out1, then part 2) with out0. @return false if any
+  /// call returned false.
+  template <typename F>
+  bool for_parts(F f, double* out0, double* out1) {
+    const bool two = num_threads_ == 2 && worker_;
+    struct Ctx {
+      Problem* p;
+      F* f;
+      double* out;
+      bool ok = true;
+    } ctx{this, &f, out1};
+    if (two) {
+      worker_->run(
+          [](void* vp) {
+            Ctx& c = *static_cast<Ctx*>(vp);
+            for (auto& cont : c.p->containers_)
+              if (c.ok) c.ok = (*c.f)(*cont, cont->part[1], c.out);
+          },
+          &ctx);
+    }
+    bool ok = true;
+    for (auto& c : containers_)
+      if (ok) ok = f(*c, c->part[0], out0);
+    if (two) worker_->wait();
+    for (auto& c : containers_)
+      if (ok) ok = f(*c, c->part[2], out0);
+    return ok && ctx.ok;
+  }
+
   static void set_error(const detail::ResidualContainerBase& c, int k, const char* what,
                         EvaluationError* error) {
     if (!error) return;
@@ -877,6 +1037,9 @@ class Problem {
   std::uint64_t generation_ = 0;
   int num_threads_ = 1;
   std::unique_ptr<detail::Worker> worker_;
+  std::vector<double> accel_buffer_;  ///< second thread's half of acceleration_rhs()
+  std::vector<double> accel_step_;    ///< h·v of acceleration_rhs()
+  bool acceleration_reserved_ = false;
 };
 
 }  // namespace geodrift::solver

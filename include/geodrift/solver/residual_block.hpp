@@ -107,8 +107,9 @@ class ResidualBlock {
   ///              otherwise W·r (uncorrected).
   /// @param jac   if non-null, corrected Jacobians of the FREE parameters (others untouched).
   /// @return false if the functor fails or the residual is not finite.
-  bool evaluate(const SqrtInformation* sqrt_infos, double* cost, Residual* r,
-                Jacobians* jac) const {
+  /// @param weighted if non-null, receives W·r before the Triggs correction.
+  bool evaluate(const SqrtInformation* sqrt_infos, double* cost, Residual* r, Jacobians* jac,
+                Residual* weighted = nullptr) const {
     bool ok = call(*r, jac, std::index_sequence_for<Params...>{});
     if (!ok || !r->allFinite()) return false;
     const SqrtInformation* W = sqrt_info_index_ >= 0 ? &sqrt_infos[sqrt_info_index_] : nullptr;
@@ -116,6 +117,7 @@ class ResidualBlock {
       *r = ((*W) * (*r)).eval();
     }
     if (sqrt_weight_ != 1.0) *r *= sqrt_weight_;
+    if (weighted) *weighted = *r;
     const double s = r->squaredNorm();
     if (loss_.is_trivial()) {
       *cost = 0.5 * s;
@@ -165,6 +167,51 @@ class ResidualBlock {
         }
       });
     });
+  }
+
+  /// W·r at the current states (weighted, no loss): the residual that geodesic acceleration
+  /// differentiates. @return false if the functor fails or r is not finite.
+  bool weighted_residual(const SqrtInformation* sqrt_infos, Residual* e) const {
+    if (!call(*e, nullptr, std::index_sequence_for<Params...>{}) || !e->allFinite()) return false;
+    if (sqrt_info_index_ >= 0) *e = (sqrt_infos[sqrt_info_index_] * (*e)).eval();
+    if (sqrt_weight_ != 1.0) *e *= sqrt_weight_;
+    return true;
+  }
+
+  /// Geodesic acceleration (Transtrum & Sethna 2012, see Options::geodesic_acceleration):
+  /// rhs += J̃ᵀ·r̃''_v for the free parameters. r''_v, the second directional derivative of the
+  /// weighted residual e = W·r along the step v, is taken by the one-sided difference
+  ///   r''_v ≈ (2/h)·[(e(x ⊞ h·v) − e(x))/h − J·v]        (their eq. 15),
+  /// in the Triggs-corrected model of linearize(): r̃''_v = (2/h)·[C·(e(x ⊞ h·v) − e(x))/h − J̃·v]
+  /// with C = √ρ'·(I − α·e·eᵀ/|e|²) the corrector at x (C = I without a loss).
+  /// @param e, J e(x) and the corrected J̃(x) as linearize() computed them (stored there).
+  /// @param e_h e(x ⊞ h·v) (weighted_residual() at the perturbed states).
+  /// @param v the step in column order (Problem's free columns).
+  /// @return false if a value is not finite (the caller skips the acceleration then).
+  bool accumulate_acceleration(const Residual& e, const Jacobians& J, const Residual& e_h,
+                               const double* v, double h, double* rhs) const {
+    Residual de = (e_h - e) / h;
+    if (!loss_.is_trivial()) {
+      const double s = e.squaredNorm();
+      double rho[3];
+      loss_.evaluate(s, rho);
+      TriggsCorrector(s, rho).correct_jacobian(e, de);
+    }
+    detail::static_for<sizeof...(Params)>([&](auto k) {
+      constexpr std::size_t K = decltype(k)::value;
+      if (col_[K] >= 0)
+        de.noalias() -=
+            std::get<K>(J) * Eigen::Map<const Eigen::Matrix<double, kDoF<K>, 1>>(v + col_[K]);
+    });
+    const Residual dd = (2.0 / h) * de;
+    if (!dd.allFinite()) return false;
+    detail::static_for<sizeof...(Params)>([&](auto k) {
+      constexpr std::size_t K = decltype(k)::value;
+      if (col_[K] < 0) return;
+      Eigen::Map<Eigen::Matrix<double, kDoF<K>, 1>>(rhs + col_[K]).noalias() +=
+          std::get<K>(J).transpose() * dd;
+    });
+    return true;
   }
 
  private:
