@@ -238,15 +238,14 @@ class ResidualContainerBase {
   /// central differences (step h, left retraction of each free parameter, states restored):
   /// returns the worst elementwise |J − J_num| / (1 + |J_num|), or +inf if unevaluable.
   virtual double jacobian_error(int k, double h) const = 0;
-  /// Geodesic acceleration, two passes over the blocks idx[0..count): store_residuals() keeps
-  /// each block's W·r at the current (perturbed) states, acceleration() then adds J̃ᵀ·r̃''_v at
-  /// the unperturbed states (ResidualBlock::accumulate_acceleration).
-  virtual bool store_residuals(const int* idx, int count, int* failed) = 0;
   /// While ≥ 0, linearize() keeps every block's W·r and corrected J̃ in this slot (0 or 1),
-  /// which acceleration(…, slot) reads.
+  /// which acceleration(…, slot) reads; the stores are sized by reserve_acceleration().
   int store_slot = -1;
   virtual void reserve_acceleration() = 0;
   virtual void release_acceleration() = 0;
+  /// Geodesic acceleration over the blocks idx[0..count), called with the states at x ⊞ h·v:
+  /// rhs += J̃ᵀ·r̃''_v from each block's W·r there and the W·r, J̃ of x kept in `slot` by
+  /// linearize() (ResidualBlock::accumulate_acceleration).
   virtual bool acceleration(const int* idx, int count, const double* v, double h, int slot,
                             double* rhs, int* failed) const = 0;
 };
@@ -341,38 +340,28 @@ class ResidualContainer final : public ResidualContainerBase {
     return ok;
   }
 
-  bool store_residuals(const int* idx, int count, int* failed) override {
-    for (int k = 0; k < count; ++k) {
-      const std::size_t i = static_cast<std::size_t>(idx[k]);
-      if (!blocks[i].weighted_residual(sqrt_infos.data(), &stored_h_[i])) {
-        *failed = idx[k];
-        return false;
-      }
-    }
-    return true;
-  }
   bool acceleration(const int* idx, int count, const double* v, double h, int slot, double* rhs,
                     int* failed) const override {
+    Residual e_h;
     for (int k = 0; k < count; ++k) {
       const std::size_t i = static_cast<std::size_t>(idx[k]);
-      if (!blocks[i].accumulate_acceleration(stored_e_[slot][i], stored_J_[slot][i], stored_h_[i],
-                                             v, h, rhs)) {
+      if (!blocks[i].weighted_residual(sqrt_infos.data(), &e_h) ||
+          !blocks[i].accumulate_acceleration(stored_e_[slot][i], stored_J_[slot][i], e_h, v, h,
+                                             rhs)) {
         *failed = idx[k];
         return false;
       }
     }
     return true;
   }
-  /// Sizes the acceleration stores (2 slots of W·r and J̃, one of W·r at x ⊞ h·v).
+  /// Sizes the acceleration stores (2 slots of W·r and J̃).
   void reserve_acceleration() override {
     for (auto& e : stored_e_) e.resize(blocks.size());
     for (auto& j : stored_J_) j.resize(blocks.size());
-    stored_h_.resize(blocks.size());
   }
   void release_acceleration() override {
     for (auto& e : stored_e_) std::remove_reference_t<decltype(e)>().swap(e);
     for (auto& j : stored_J_) std::remove_reference_t<decltype(j)>().swap(j);
-    std::remove_reference_t<decltype(stored_h_)>().swap(stored_h_);
   }
 
   void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo, int* hi) const override {
@@ -458,10 +447,9 @@ class ResidualContainer final : public ResidualContainerBase {
 
  private:
   /// Geodesic acceleration stores: W·r and J̃ per block for 2 linearisation points (the
-  /// current one and the speculative trial), W·r at x ⊞ h·v.
+  /// current one and the speculative trial).
   mutable std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_e_[2];
   mutable std::vector<Jacobians, Eigen::aligned_allocator<Jacobians>> stored_J_[2];
-  std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_h_;
 
   template <std::size_t... I>
   static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
@@ -834,8 +822,8 @@ class Problem {
   }
 
   /// Allocates (true) or frees (false) the geodesic-acceleration stores: per residual block
-  /// W·r and J̃ for two linearisation points and W·r at x ⊞ h·v (about 2·(m·n_J + m) doubles
-  /// for m residual rows and n_J Jacobian columns per block: 2 × 98 + 21 doubles for a Sim(3)
+  /// W·r and J̃ for two linearisation points (2·(m·n_J + m) doubles
+  /// for m residual rows and n_J Jacobian columns per block: 2 × (98 + 7) for a Sim(3)
   /// edge). Dropped by finalize().
   void reserve_acceleration(bool on) {
     GEODRIFT_CHECK(finalized_, "Problem::reserve_acceleration() before finalize()");
@@ -851,34 +839,27 @@ class Problem {
   /// Geodesic acceleration right-hand side rhs = J̃ᵀ·r̃''_v at the point last linearised with
   /// store_slot = slot (the current states; see ResidualBlock::accumulate_acceleration). The
   /// states are moved to x ⊞ h·v for one residual-only pass and restored (through the
-  /// save_state() buffers). rhs: num_effective_parameters() doubles, overwritten. With 2
-  /// threads the blocks are split as in linearize(). @return false if a block cannot be
-  /// evaluated at x ⊞ h·v or a value is not finite.
+  /// save_state() buffers; bit for bit). rhs: num_effective_parameters() doubles, overwritten. With
+  /// 2 threads the blocks are split as in linearize(). @return false if a block cannot be evaluated
+  /// at x ⊞ h·v or a value is not finite.
   bool acceleration_rhs(const double* v, double h, int slot, double* rhs) {
     GEODRIFT_CHECK(finalized_ && acceleration_reserved_ && slot >= 0 && slot < 2,
                    "Problem::acceleration_rhs() needs reserve_acceleration(true) and slot 0/1");
     const int n = structure_->num_cols();
     accel_step_.resize(static_cast<std::size_t>(n));
     for (int c = 0; c < n; ++c) accel_step_[static_cast<std::size_t>(c)] = h * v[c];
-    save_state();
-    plus(accel_step_.data());
-    bool ok = for_parts(
-        [](detail::ResidualContainerBase& c, const std::vector<int>& l, double*) {
-          int failed = -1;
-          return c.store_residuals(l.data(), static_cast<int>(l.size()), &failed);
-        },
-        nullptr, nullptr);
-    restore_state();
-    if (!ok) return false;
     std::fill(rhs, rhs + n, 0.0);
     const bool two = num_threads_ == 2 && worker_;
     if (two) accel_buffer_.assign(static_cast<std::size_t>(n), 0.0);
-    ok = for_parts(
+    save_state();
+    plus(accel_step_.data());
+    const bool ok = for_parts(
         [v, h, slot](detail::ResidualContainerBase& c, const std::vector<int>& l, double* out) {
           int failed = -1;
           return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, slot, out, &failed);
         },
         rhs, two ? accel_buffer_.data() : nullptr);
+    restore_state();
     if (!ok) return false;
     if (two)
       for (int c = 0; c < n; ++c) rhs[c] += accel_buffer_[static_cast<std::size_t>(c)];
