@@ -471,11 +471,17 @@ class LevenbergMarquardt {
       if (st == LinearSolverStatus::kFatal)
         return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
                     finish);
+      // x = −(H + λD)⁻¹·b with the current factorisation (timed as a solve).
+      const auto solve_neg = [&](const Eigen::VectorXd& b, Eigen::VectorXd* x) {
+        const auto ts = Clock::now();
+        rhs_ = -b;
+        const LinearSolverStatus s2 = solver_->solve(rhs_.data(), x->data());
+        sum.time_solve += std::chrono::duration<double>(Clock::now() - ts).count();
+        return s2;
+      };
       bool step_ok = st == LinearSolverStatus::kSuccess;
       if (step_ok) {
-        rhs_ = -g_;
-        st = solver_->solve(rhs_.data(), delta_.data());
-        sum.time_solve += std::chrono::duration<double>(Clock::now() - t1).count();
+        st = solve_neg(g_, &delta_);
         if (st == LinearSolverStatus::kFatal)
           return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
                       finish);
@@ -491,12 +497,9 @@ class LevenbergMarquardt {
         const auto ta = Clock::now();
         const bool aok = problem->acceleration_rhs(delta_.data(), options_.acceleration_step, cur,
                                                    accel_.data());
-        const auto tb = Clock::now();
-        sum.time_evaluate += std::chrono::duration<double>(tb - ta).count();
+        sum.time_evaluate += std::chrono::duration<double>(Clock::now() - ta).count();
         if (aok) {  // otherwise (not evaluable at x ⊞ h·v) the plain step v is tried
-          rhs_ = -accel_;
-          st = solver_->solve(rhs_.data(), accel_.data());
-          sum.time_solve += std::chrono::duration<double>(Clock::now() - tb).count();
+          st = solve_neg(accel_, &accel_);
           if (st == LinearSolverStatus::kFatal)
             return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
                         finish);
