@@ -309,6 +309,19 @@ class ResidualContainer final : public ResidualContainerBase {
     for (int k = 0; k < count; ++k) {
       const Block& b = blocks[idx[k]];
       double ck;
+      if constexpr (Block::kHasLink) {
+        if (b.linked()) {  // both parameters free: H_ij, H_jj, g_j from J̃_i and the link
+          typename Block::LinkGroup link;
+          if (!b.evaluate_linked(sqrt_infos.data(), &ck, &r, &std::get<0>(J), &link)) {
+            *failed = idx[k];
+            ok = false;
+            break;
+          }
+          c += ck;
+          b.accumulate_linked(r, std::get<0>(J), link, H, g);
+          continue;
+        }
+      }
       if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J)) {
         *failed = idx[k];
         ok = false;
