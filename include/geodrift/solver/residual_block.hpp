@@ -73,21 +73,32 @@ struct LinkGroupOf<F, std::void_t<typename F::LinkGroup>> {
   using type = typename F::LinkGroup;
 };
 
-/// dst (column-major, outer stride `stride`) += M, one contiguous fixed-size column at a time.
-/// Eigen vectorises the add of a fixed-size column; an add into the whole strided block map
-/// (and any product with a transposed Jacobian as its left factor) stays a scalar loop.
+/// dst (column-major, outer stride `stride`) += M, or = M if `assign` (the block's first
+/// writer in a linearisation: H needs no zeroing pass), one contiguous fixed-size column at a
+/// time. Eigen vectorises the add of a fixed-size column; an add into the whole strided block
+/// map (and any product with a transposed Jacobian as its left factor) stays a scalar loop.
 template <typename Mat>
-inline void add_block(double* dst, int stride, const Mat& M) {
+inline void add_block(double* dst, int stride, const Mat& M, bool assign) {
   using Col = Eigen::Matrix<double, Mat::RowsAtCompileTime, 1>;
-  for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
-    Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) += M.col(c);
+  if (assign) {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) = M.col(c);
+  } else {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) += M.col(c);
+  }
 }
-/// dst −= M, as add_block.
+/// dst −= M (or = −M if `assign`), as add_block.
 template <typename Mat>
-inline void subtract_block(double* dst, int stride, const Mat& M) {
+inline void subtract_block(double* dst, int stride, const Mat& M, bool assign) {
   using Col = Eigen::Matrix<double, Mat::RowsAtCompileTime, 1>;
-  for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
-    Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) -= M.col(c);
+  if (assign) {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) = -M.col(c);
+  } else {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) -= M.col(c);
+  }
 }
 }  // namespace detail
 
@@ -126,6 +137,7 @@ class ResidualBlock {
     col_.fill(-1);
     off_.fill(-1);
     stride_.fill(0);
+    assign_.fill(false);
   }
 
   const Functor& functor() const { return functor_; }
@@ -145,6 +157,9 @@ class ResidualBlock {
   std::array<int, kNumParams> col_;
   std::array<int, kNumPairs> off_;
   std::array<int, kNumPairs> stride_;
+  /// Per pair: this block is the first writer of its H block in Problem::linearize()'s order,
+  /// so it assigns instead of adding (set by Problem after partitioning; false = add).
+  std::array<bool, kNumPairs> assign_;
 
   /// Evaluates the weighted, robustified residual.
   /// @param sqrt_infos the container's square-root information table (may be null if unused).
@@ -205,15 +220,15 @@ class ResidualBlock {
           if constexpr (L == K) {
             Eigen::Matrix<double, kDoF<K>, kDoF<K>> M;
             M.noalias() = std::get<K>(Jt) * std::get<K>(jac);
-            detail::add_block(H + off_[p], stride_[p], M);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           } else if (col_[K] < col_[L]) {
             Eigen::Matrix<double, kDoF<K>, kDoF<L>> M;
             M.noalias() = std::get<K>(Jt) * std::get<L>(jac);
-            detail::add_block(H + off_[p], stride_[p], M);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           } else {
             Eigen::Matrix<double, kDoF<L>, kDoF<K>> M;
             M.noalias() = std::get<L>(Jt) * std::get<K>(jac);
-            detail::add_block(H + off_[p], stride_[p], M);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           }
         }
       });
@@ -237,13 +252,13 @@ class ResidualBlock {
     const Mat Mj = link.times_adjoint(Nt);  // H_jj contribution Ad(G)ᵀ·H_ii'·Ad(G)
     Eigen::Map<Vec>(g + col_[0]) += u;
     Eigen::Map<Vec>(g + col_[1]) -= link.adjoint_transpose_times(u);
-    detail::add_block(H + off_[pair_index(0, 0)], stride_[pair_index(0, 0)], M);
-    detail::add_block(H + off_[pair_index(1, 1)], stride_[pair_index(1, 1)], Mj);
-    const int p = pair_index(0, 1);
-    if (col_[0] < col_[1])
-      detail::subtract_block(H + off_[p], stride_[p], N);  // block rows of parameter 0
-    else
-      detail::subtract_block(H + off_[p], stride_[p], Nt);  // block rows of parameter 1
+    constexpr int p00 = pair_index(0, 0), p01 = pair_index(0, 1), p11 = pair_index(1, 1);
+    detail::add_block(H + off_[p00], stride_[p00], M, assign_[p00]);
+    detail::add_block(H + off_[p11], stride_[p11], Mj, assign_[p11]);
+    if (col_[0] < col_[1])  // block rows of parameter 0
+      detail::subtract_block(H + off_[p01], stride_[p01], N, assign_[p01]);
+    else  // block rows of parameter 1
+      detail::subtract_block(H + off_[p01], stride_[p01], Nt, assign_[p01]);
   }
 
  private:
