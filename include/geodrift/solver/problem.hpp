@@ -226,7 +226,7 @@ class ResidualContainerBase {
                          LinearizeTimes* times) const = 0;
   /// For blocks idx[0..count) in linearize() order: each H block whose offset is not yet marked
   /// in *written is assigned (not added) by this residual, and marked.
-  virtual void mark_first_writes(const int* idx, int count, std::vector<char>* written) = 0;
+  virtual void mark_first_writes(const int* idx, int count, std::vector<bool>* written) = 0;
   /// Smallest and largest H block index of residual k's free parameters (-1, -1 if none).
   virtual void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo,
                            int* hi) const = 0;
@@ -339,15 +339,15 @@ class ResidualContainer final : public ResidualContainerBase {
     return ok;
   }
 
-  void mark_first_writes(const int* idx, int count, std::vector<char>* written) override {
+  void mark_first_writes(const int* idx, int count, std::vector<bool>* written) override {
     for (int k = 0; k < count; ++k) {
       Block& b = blocks[idx[k]];
       for (int p = 0; p < Block::kNumPairs; ++p) {
         b.assign_[p] = false;
         if (b.off_[p] < 0) continue;
-        char& w = (*written)[static_cast<std::size_t>(b.off_[p])];
-        b.assign_[p] = w == 0;
-        w = 1;
+        const std::size_t o = static_cast<std::size_t>(b.off_[p]);
+        b.assign_[p] = !(*written)[o];
+        (*written)[o] = true;
       }
     }
   }
@@ -891,7 +891,7 @@ class Problem {
     }
     // First writer of every H block in linearize()'s order (thread 0's lists, thread 1's —
     // disjoint H blocks —, then the shared ones), and the blocks nobody writes.
-    std::vector<char> written(static_cast<std::size_t>(structure_->num_values()), 0);
+    std::vector<bool> written(static_cast<std::size_t>(structure_->num_values()), false);
     for (int q = 0; q < 3; ++q)
       for (auto& c : containers_)
         c->mark_first_writes(c->part[q].data(), static_cast<int>(c->part[q].size()), &written);
