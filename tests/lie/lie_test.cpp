@@ -433,7 +433,8 @@ TEST_CASE("Sim3 reduced theta series agree with the full series and the closed f
 }
 
 TEMPLATE_TEST_CASE(
-    "times_adjoint equals the product with the adjoint; Sim3 log shares its "
+    "times_adjoint and adjoint_transpose_times equal the products with the adjoint; Sim3 log "
+    "shares its "
     "coefficients with left_jacobian_inverse",
     "[lie]", SE3d, Sim3d) {
   using G = TestType;
@@ -452,6 +453,9 @@ TEMPLATE_TEST_CASE(
     for (int i = 0; i < M.size(); ++i) M.data()[i] = n(rng);
     const typename G::Jacobian ref = M * X.adjoint();
     CHECK((X.times_adjoint(M) - ref).norm() <= 1e-13 * (1.0 + ref.norm()));
+    const typename G::Tangent u = M.col(0);
+    const typename G::Tangent uref = X.adjoint().transpose() * u;
+    CHECK((X.adjoint_transpose_times(u) - uref).norm() <= 1e-13 * (1.0 + uref.norm()));
     for (const G& Y : {X, G::exp(xi_small)}) {
       typename G::Jacobian J;
       const typename G::Tangent l = Y.log(&J);

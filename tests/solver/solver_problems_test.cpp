@@ -1,8 +1,10 @@
 // Whole problems: pose graphs (SE3, Sim3) and bundle adjustment, their assembled Jacobians and
 // normal equations checked numerically, and every linear-solver path reaching the same optimum.
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -213,6 +215,94 @@ TEMPLATE_TEST_CASE("Assembled pose-graph Jacobian and normal equations match num
   CHECK(test::near(H.to_dense(), Jd.transpose() * Jd, 1e-12));
   CHECK(test::near(gvec, Jd.transpose() * r, 1e-12));
   CHECK(cost == Approx(0.5 * r.squaredNorm()).epsilon(1e-12));
+}
+
+/// RelativePoseResidual without its LinkGroup: forces ResidualBlock's generic accumulation.
+template <class G>
+struct UnlinkedRelativePose {
+  static constexpr int kNumResiduals = G::kDoF;
+  solver::RelativePoseResidual<G> f;
+  bool operator()(const G& S_i, const G& S_j, typename solver::RelativePoseResidual<G>::Vec* r,
+                  typename solver::RelativePoseResidual<G>::Mat* J_i = nullptr,
+                  typename solver::RelativePoseResidual<G>::Mat* J_j = nullptr) const {
+    return f(S_i, S_j, r, J_i, J_j);
+  }
+};
+
+TEMPLATE_TEST_CASE("Linked relative-pose accumulation gives the generic H and g", "[solver]",
+                   lie::SE3d, lie::Sim3d) {
+  // H_ij = −H_ii·Ad(G), H_jj = Ad(G)ᵀ·H_ii·Ad(G), g_j = −Ad(G)ᵀ·g_i (residual_block.hpp) against
+  // the generic J̃ᵀJ̃ with J̃_j formed: full information matrix, Huber and Cauchy with residuals
+  // on both sides of the threshold, edges in both column orders, a constant pose (generic path).
+  using G = TestType;
+  constexpr int D = G::kDoF;
+  static_assert(solver::ResidualBlock<solver::RelativePoseResidual<G>, G, G>::kHasLink);
+  static_assert(!solver::ResidualBlock<UnlinkedRelativePose<G>, G, G>::kHasLink);
+  PoseGraph<G> g(30, 0.02, 17);
+  std::mt19937 rng(18);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int k = 3; k < 30; k += 4) g.edges.push_back({k, k - 3, g.edges[k].dS.inverse()});
+  Eigen::Matrix<double, D, D> A;
+  for (int k = 0; k < D * D; ++k) A.data()[k] = n(rng);
+  const Eigen::Matrix<double, D, D> info =
+      10.0 * (A * A.transpose() + Eigen::Matrix<double, D, D>::Identity());
+  // Weighted residual norms |Lᵀr| (Λ = L·Lᵀ): the loss scale is their median.
+  const Eigen::Matrix<double, D, D> L = info.llt().matrixL();
+  std::vector<double> norms;
+  for (const auto& e : g.edges) {
+    typename G::Tangent r;
+    solver::RelativePoseResidual<G>{e.dS}(g.poses[e.i], g.poses[e.j], &r);
+    norms.push_back((L.transpose() * r).norm());
+  }
+  std::vector<double> sorted = norms;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  for (const RobustLoss& loss :
+       {RobustLoss(), RobustLoss::huber(median), RobustLoss::cauchy(median)}) {
+    std::vector<G> poses_generic = g.poses;
+    Problem linked, generic;
+    int robust = 0;
+    for (std::size_t k = 0; k < g.edges.size(); ++k) {
+      const auto& e = g.edges[k];
+      linked.add_residual_block(solver::RelativePoseResidual<G>{e.dS}, loss, info, &g.poses[e.i],
+                                &g.poses[e.j]);
+      generic.add_residual_block(UnlinkedRelativePose<G>{{e.dS}}, loss, info, &poses_generic[e.i],
+                                 &poses_generic[e.j]);
+      robust += norms[k] > loss.parameter() ? 1 : 0;
+    }
+    linked.set_constant(&g.poses[0]);
+    generic.set_constant(&poses_generic[0]);
+    linked.finalize();
+    generic.finalize();
+    solver::BlockSparseMatrix H1(&linked.structure()), H2(&generic.structure());
+    Eigen::VectorXd g1(linked.num_effective_parameters()), g2(generic.num_effective_parameters());
+    double c1 = 0.0, c2 = 0.0;
+    solver::LinearizeTimes t;
+    REQUIRE(linked.linearize(&H1, g1.data(), &c1, &t));
+    REQUIRE(generic.linearize(&H2, g2.data(), &c2, &t));
+    INFO("loss " << int(loss.type()) << ", " << robust << " of " << g.edges.size()
+                 << " edges beyond the loss parameter");
+    if (!loss.is_trivial()) {
+      CHECK(robust > 5);
+      CHECK(robust < int(g.edges.size()) - 5);
+    }
+    const Eigen::MatrixXd D1 = H1.to_dense(), D2 = H2.to_dense();
+    // H is overwritten whatever it held (each block's first writer assigns, no zeroing pass),
+    // with one thread or two (other work lists, other first writers).
+    for (int threads : {1, 2}) {
+      linked.set_num_threads(threads);
+      std::fill(H1.values(), H1.values() + linked.structure().num_values(),
+                std::numeric_limits<double>::quiet_NaN());
+      g1.setConstant(std::numeric_limits<double>::quiet_NaN());
+      REQUIRE(linked.linearize(&H1, g1.data(), &c1, &t));
+      CHECK((H1.to_dense() - D1).norm() <= 1e-14 * D1.norm());
+    }
+    linked.set_num_threads(1);
+    CHECK((D1 - D2).norm() <= 1e-12 * D2.norm());
+    CHECK((D1 - D2).cwiseAbs().maxCoeff() <= 1e-12 * D2.cwiseAbs().maxCoeff());
+    CHECK((g1 - g2).norm() <= 1e-12 * g2.norm());
+    CHECK(c1 == Approx(c2).epsilon(1e-14));
+  }
 }
 
 TEMPLATE_TEST_CASE("Noiseless pose graphs reach cost below 1e-20", "[solver]", lie::SE3d,

@@ -74,6 +74,39 @@ TEMPLATE_TEST_CASE("Relative pose residual Jacobians match central differences",
   }
 }
 
+TEMPLATE_TEST_CASE("Relative pose residual: linked() Jacobian link matches central differences",
+                   "[solver][jacobian]", lie::SE3d, lie::Sim3d) {
+  // linked() returns operator()'s r and J_r_Si and the link G: J_r_Sj = −J_r_Si·Ad(G) must be
+  // the central-difference Jacobian in S_j (what ResidualBlock's linked accumulation assumes).
+  using G = TestType;
+  using Res = solver::RelativePoseResidual<G>;
+  std::mt19937 rng(142);
+  for (int trial = 0; trial < kSamples; ++trial) {
+    const G S_i = test::random_element<G>(rng);
+    const G dS = test::random_element<G>(rng);
+    const G S_j = G::exp(-moderate_tangent<G>(rng, trial)) * dS * S_i;
+    const Res res{dS};
+    typename Res::Vec r, r_link;
+    typename Res::Mat J_i, J_j, J_i_link;
+    G link;
+    REQUIRE(res(S_i, S_j, &r, &J_i, &J_j));
+    REQUIRE(res.linked(S_i, S_j, &r_link, &J_i_link, &link));
+    CHECK(r_link == r);
+    CHECK(J_i_link == J_i);
+    const typename Res::Mat J_j_link = -link.times_adjoint(J_i_link);
+    const auto r_of_j = [&](const G& S) {
+      typename Res::Vec v;
+      res(S_i, S, &v);
+      return Eigen::VectorXd(v);
+    };
+    const Eigen::MatrixXd Nj = test::numeric_jacobian(r_of_j, S_j);
+    INFO("trial " << trial << " r = " << r.transpose());
+    CHECK(test::near(J_j_link, Nj, 1e-6, test::rounding_floor(fscale(r) + 1e4, 1e-6)));
+    // and the same matrix as operator()'s J_r_Sj up to rounding
+    CHECK((J_j_link - J_j).norm() <= 1e-9 * (1.0 + J_j.norm()));
+  }
+}
+
 TEMPLATE_TEST_CASE("Pose prior and camera-centre prior Jacobians match central differences",
                    "[solver][jacobian]", lie::SE3d, lie::Sim3d) {
   using G = TestType;

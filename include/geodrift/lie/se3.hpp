@@ -120,6 +120,19 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
     return out;
   }
 
+  /// Ad(T)ᵀ·u for any u without forming Ad(T) (a gradient through a composition):
+  ///   Ad(T)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  Rᵀ·u_ν ]   (equals adjoint().transpose() * u to
+  ///   rounding).
+  Tangent adjoint_transpose_times(const Tangent& u) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    const Point un = u.template segment<3>(kNu);
+    Tangent out;
+    out.template segment<3>(kOmega).noalias() =
+        R.transpose() * (u.template segment<3>(kOmega) - t_.cross(un));
+    out.template segment<3>(kNu).noalias() = R.transpose() * un;
+    return out;
+  }
+
   /// Exact left Jacobian Jl(ξ) = Σ_k ad_ξᵏ/(k+1)!, with exp(ξ + dξ) = exp(Jl·dξ)·exp(ξ):
   ///   [ J   0 ]      J = Jl_SO3(ω),
   ///   [ Q   J ]      Q = ∂(J(ω)ν)/∂ω + [J(ω)ν]x·J(ω)   (Barfoot's Q(ν, ω), closed form in

@@ -161,6 +161,20 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     return out;
   }
 
+  /// Ad(S)ᵀ·u for any u without forming Ad(S) (a gradient through a composition):
+  ///   Ad(S)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  u_σ − t·u_ν ;  s·Rᵀ·u_ν ]
+  /// (equals adjoint().transpose() * u to rounding).
+  Tangent adjoint_transpose_times(const Tangent& u) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    const Point un = u.template segment<3>(kNu);
+    Tangent out;
+    out.template segment<3>(kOmega).noalias() =
+        R.transpose() * (u.template segment<3>(kOmega) - t_.cross(un));
+    out(kSigma) = u(kSigma) - t_.dot(un);
+    out.template segment<3>(kNu).noalias() = s_ * (R.transpose() * un);
+    return out;
+  }
+
   /// Exact left Jacobian Jl(ξ) = Σ_k ad_ξᵏ/(k+1)!, exp(ξ + dξ) = exp(Jl·dξ)·exp(ξ); rows/cols
   /// (ω, σ, ν):
   ///   [ J   0   0 ]     J = Jl_SO3(ω),  C = c0·I + c1·W + c2·W²  (W = [ω]x),

@@ -31,6 +31,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -224,6 +225,9 @@ class ResidualContainerBase {
   /// disjoint lists whose H/g entries do not overlap (scratch is on the caller's stack).
   virtual bool linearize(const int* idx, int count, double* H, double* g, double* cost, int* failed,
                          LinearizeTimes* times) const = 0;
+  /// For blocks idx[0..count) in linearize() order: each H block whose offset is not yet marked
+  /// in *written is assigned (not added) by this residual, and marked.
+  virtual void mark_first_writes(const int* idx, int count, std::vector<bool>* written) = 0;
   /// Smallest and largest H block index of residual k's free parameters (-1, -1 if none).
   virtual void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo,
                            int* hi) const = 0;
@@ -320,19 +324,31 @@ class ResidualContainer final : public ResidualContainerBase {
     for (int k = 0; k < count; ++k) {
       const Block& b = blocks[idx[k]];
       double ck;
-      if (store_slot >= 0) {  // geodesic acceleration: keep W·r and J̃ of this point
-        const std::size_t i = static_cast<std::size_t>(idx[k]);
-        if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J, &stored_e_[store_slot][i])) {
-          *failed = idx[k];
-          ok = false;
-          break;
+      // Geodesic acceleration: keep W·r and J̃ of this point (store_slot ≥ 0).
+      Residual* const e_out = store_slot >= 0 ? &stored_e_[store_slot][idx[k]] : nullptr;
+      if constexpr (Block::kHasLink) {
+        if (b.linked()) {  // both parameters free: H_ij, H_jj, g_j from J̃_i and the link
+          typename Block::LinkGroup link;
+          if (!b.evaluate_linked(sqrt_infos.data(), &ck, &r, &std::get<0>(J), &link, e_out)) {
+            *failed = idx[k];
+            ok = false;
+            break;
+          }
+          c += ck;
+          b.accumulate_linked(r, std::get<0>(J), link, H, g);
+          if (e_out) {  // J̃_1 = −J̃_0·Ad(G)
+            std::get<1>(J) = -link.times_adjoint(std::get<0>(J));
+            stored_J_[store_slot][idx[k]] = J;
+          }
+          continue;
         }
-        stored_J_[store_slot][i] = J;
-      } else if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J)) {
+      }
+      if (!b.evaluate(sqrt_infos.data(), &ck, &r, &J, e_out)) {
         *failed = idx[k];
         ok = false;
         break;
       }
+      if (e_out) stored_J_[store_slot][idx[k]] = J;
       c += ck;
       b.accumulate(r, J, H, g);
     }
@@ -363,6 +379,19 @@ class ResidualContainer final : public ResidualContainerBase {
   void release_acceleration() override {
     for (auto& e : stored_e_) std::remove_reference_t<decltype(e)>().swap(e);
     for (auto& j : stored_J_) std::remove_reference_t<decltype(j)>().swap(j);
+  }
+
+  void mark_first_writes(const int* idx, int count, std::vector<bool>* written) override {
+    for (int k = 0; k < count; ++k) {
+      Block& b = blocks[idx[k]];
+      for (int p = 0; p < Block::kNumPairs; ++p) {
+        b.assign_[p] = false;
+        if (b.off_[p] < 0) continue;
+        const std::size_t o = static_cast<std::size_t>(b.off_[p]);
+        b.assign_[p] = !(*written)[o];
+        (*written)[o] = true;
+      }
+    }
   }
 
   void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo, int* hi) const override {
@@ -706,7 +735,14 @@ class Problem {
       }
     } guard(containers_, store_slot);
     const auto tz = std::chrono::steady_clock::now();
-    H->set_zero();
+    // No zeroing pass over H: every block's first writer assigns (mark_first_writes); only
+    // blocks no residual writes are zeroed here.
+    GEODRIFT_CHECK(&H->structure() == structure_.get(),
+                   "Problem::linearize(): H is not on this problem's structure()");
+    for (const auto& z : unwritten_) {
+      double* d = H->values() + z[0];
+      for (int c = 0; c < z[2]; ++c) std::fill(d + c * z[3], d + c * z[3] + z[1], 0.0);
+    }
     std::fill(g, g + structure_->num_cols(), 0.0);
     times->assemble += std::chrono::duration<double>(std::chrono::steady_clock::now() - tz).count();
     *cost = 0.0;
@@ -964,6 +1000,19 @@ class Problem {
         c->part[hi < m ? 0 : lo >= m ? 1 : 2].push_back(k);
       }
     }
+    // First writer of every H block in linearize()'s order (thread 0's lists, thread 1's —
+    // disjoint H blocks —, then the shared ones), and the blocks nobody writes.
+    std::vector<bool> written(static_cast<std::size_t>(structure_->num_values()), false);
+    for (int q = 0; q < 3; ++q)
+      for (auto& c : containers_)
+        c->mark_first_writes(c->part[q].data(), static_cast<int>(c->part[q].size()), &written);
+    unwritten_.clear();
+    const BlockStructure& s = *structure_;
+    for (int b = 0; b < s.num_blocks(); ++b)
+      for (int k = s.block_col_ptr()[b]; k < s.block_col_ptr()[b + 1]; ++k)
+        if (!written[static_cast<std::size_t>(s.block_offsets()[k])])
+          unwritten_.push_back({s.block_offsets()[k], s.block_size(s.block_rows()[k]),
+                                s.block_size(b), s.column_height(b)});
   }
 
   /// Runs f(container, work list, out) over every container's work lists: part 0 (and, with
@@ -1014,6 +1063,8 @@ class Problem {
   std::vector<std::pair<int, int>> order_;  ///< residual id -> (container, index)
   std::vector<int> row_;                    ///< residual id -> first row
   std::unique_ptr<BlockStructure> structure_;
+  /// H blocks no residual writes: {offset, rows, cols, stride}, zeroed by linearize().
+  std::vector<std::array<int, 4>> unwritten_;
   bool finalized_ = false;
   bool schur_ordering_ = false;
   std::uint64_t generation_ = 0;

@@ -20,6 +20,21 @@
 /// parameters and for cost-only evaluations). Returning false means "cannot evaluate here"
 /// (e.g. a point behind the camera): LM rejects the step, or stops if it happens at the start.
 ///
+/// ## Linked Jacobians (optional)
+/// A two-parameter functor whose second Jacobian is −(first)·Ad(G) for a group element G it
+/// computes anyway (RelativePoseResidual: J_r_Sj = −J_r_Si·Ad(S_i·S_j⁻¹)) may declare
+/// @code
+///   using LinkGroup = lie::Sim3d;   // a group with adjoint_transpose_times(), times_adjoint()
+///   bool linked(const lie::Sim3d& S_i, const lie::Sim3d& S_j, Eigen::Matrix<double, 7, 1>* r,
+///               Eigen::Matrix<double, 7, 7>* J_r_Si, lie::Sim3d* G) const;  // G: J_r_Sj link
+/// @endcode
+/// When both parameters are free, ResidualBlock then evaluates only J̃_i (weight and Triggs
+/// correction act from the left, so J̃_j = −J̃_i·Ad(G) still holds) and accumulates
+///   H_ii += J̃_iᵀJ̃_i,  H_ij −= H_ii'·Ad(G),  H_jj += Ad(G)ᵀ·H_ii'·Ad(G),  g_i += u,
+///   g_j −= Ad(G)ᵀ·u   (H_ii' = J̃_iᵀJ̃_i, u = J̃_iᵀr̃),
+/// with two structured adjoint products instead of forming J̃_j and two more JᵀJ products.
+/// operator() must stay consistent with linked() (tests compare both paths).
+///
 /// ## What the block adds
 /// r_w = W·r (W: scalar √λ or an upper-triangular square-root information matrix), cost
 /// ½ρ(|r_w|²), then the Triggs correction (loss.hpp) of r_w and the Jacobians. No virtual call:
@@ -47,6 +62,44 @@ template <std::size_t N, typename F>
 void static_for(F&& f) {
   static_for_impl(std::forward<F>(f), std::make_index_sequence<N>{});
 }
+
+/// Functor::LinkGroup if the functor declares one (see "Linked Jacobians" above), else void.
+template <typename F, typename = void>
+struct LinkGroupOf {
+  using type = void;
+};
+template <typename F>
+struct LinkGroupOf<F, std::void_t<typename F::LinkGroup>> {
+  using type = typename F::LinkGroup;
+};
+
+/// dst (column-major, outer stride `stride`) += M, or = M if `assign` (the block's first
+/// writer in a linearisation: H needs no zeroing pass), one contiguous fixed-size column at a
+/// time. Eigen vectorises the add of a fixed-size column; an add into the whole strided block
+/// map (and any product with a transposed Jacobian as its left factor) stays a scalar loop.
+template <typename Mat>
+inline void add_block(double* dst, int stride, const Mat& M, bool assign) {
+  using Col = Eigen::Matrix<double, Mat::RowsAtCompileTime, 1>;
+  if (assign) {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) = M.col(c);
+  } else {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) += M.col(c);
+  }
+}
+/// dst −= M (or = −M if `assign`), as add_block.
+template <typename Mat>
+inline void subtract_block(double* dst, int stride, const Mat& M, bool assign) {
+  using Col = Eigen::Matrix<double, Mat::RowsAtCompileTime, 1>;
+  if (assign) {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) = -M.col(c);
+  } else {
+    for (int c = 0; c < Mat::ColsAtCompileTime; ++c)
+      Eigen::Map<Col>(dst + static_cast<std::ptrdiff_t>(c) * stride) -= M.col(c);
+  }
+}
 }  // namespace detail
 
 template <typename Functor, typename... Params>
@@ -66,6 +119,10 @@ class ResidualBlock {
   using Param = std::tuple_element_t<K, std::tuple<Params...>>;
   template <std::size_t K>
   static constexpr int kDoF = Manifold<Param<K>>::kDoF;
+  /// The functor's LinkGroup (void if it declares none); see "Linked Jacobians".
+  using LinkGroup = typename detail::LinkGroupOf<Functor>::type;
+  static constexpr bool kHasLink = !std::is_void_v<LinkGroup>;
+  using FirstJacobian = std::tuple_element_t<0, Jacobians>;
 
   /// @param sqrt_weight scalar factor applied to r (√λ), and, if sqrt_info_index ≥ 0, the
   ///        index of a square-root information matrix in the container's table.
@@ -80,6 +137,7 @@ class ResidualBlock {
     col_.fill(-1);
     off_.fill(-1);
     stride_.fill(0);
+    assign_.fill(false);
   }
 
   const Functor& functor() const { return functor_; }
@@ -99,6 +157,9 @@ class ResidualBlock {
   std::array<int, kNumParams> col_;
   std::array<int, kNumPairs> off_;
   std::array<int, kNumPairs> stride_;
+  /// Per pair: this block is the first writer of its H block in Problem::linearize()'s order,
+  /// so it assigns instead of adding (set by Problem after partitioning; false = add).
+  std::array<bool, kNumPairs> assign_;
 
   /// Evaluates the weighted, robustified residual.
   /// @param sqrt_infos the container's square-root information table (may be null if unused).
@@ -110,59 +171,65 @@ class ResidualBlock {
   /// @param weighted if non-null, receives W·r before the Triggs correction.
   bool evaluate(const SqrtInformation* sqrt_infos, double* cost, Residual* r, Jacobians* jac,
                 Residual* weighted = nullptr) const {
-    bool ok = call(*r, jac, std::index_sequence_for<Params...>{});
-    if (!ok || !r->allFinite()) return false;
-    const SqrtInformation* W = sqrt_info_index_ >= 0 ? &sqrt_infos[sqrt_info_index_] : nullptr;
-    if (W) {
-      *r = ((*W) * (*r)).eval();
-    }
-    if (sqrt_weight_ != 1.0) *r *= sqrt_weight_;
-    if (weighted) *weighted = *r;
-    const double s = r->squaredNorm();
-    if (loss_.is_trivial()) {
-      *cost = 0.5 * s;
-      if (jac) apply_weight(W, *jac);
-      return std::isfinite(*cost);
-    }
-    double rho[3];
-    loss_.evaluate(s, rho);
-    *cost = 0.5 * rho[0];
-    if (jac) {
-      apply_weight(W, *jac);
-      const TriggsCorrector corr(s, rho);
+    if (!call(*r, jac, std::index_sequence_for<Params...>{})) return false;
+    return weigh(sqrt_infos, cost, r, jac != nullptr, weighted, [&](const auto& fn) {
       detail::static_for<sizeof...(Params)>([&](auto k) {
-        if (col_[k] >= 0) corr.correct_jacobian(*r, std::get<k>(*jac));
+        if (col_[k] >= 0) fn(std::get<k>(*jac));
       });
-      corr.correct_residual(*r);
-    }
-    return std::isfinite(*cost);
+    });
+  }
+
+  /// Whether the linked path applies (the functor declares a link and both parameters are free).
+  bool linked() const {
+    if constexpr (kHasLink)
+      return col_[0] >= 0 && col_[1] >= 0;
+    else
+      return false;
+  }
+
+  /// As evaluate() with Jacobians, through Functor::linked(): the weighted, corrected residual,
+  /// J̃ of the first parameter and the link G (J̃ of the second is −J̃_0·Ad(G)).
+  template <typename G>
+  bool evaluate_linked(const SqrtInformation* sqrt_infos, double* cost, Residual* r,
+                       FirstJacobian* J0, G* link, Residual* weighted = nullptr) const {
+    static_assert(kHasLink && std::is_same_v<G, LinkGroup>, "the functor declares no LinkGroup");
+    if (!functor_.linked(Manifold<Param<0>>::view(std::get<0>(states_)),
+                         Manifold<Param<1>>::view(std::get<1>(states_)), r, J0, link))
+      return false;
+    return weigh(sqrt_infos, cost, r, true, weighted, [&](const auto& fn) { fn(*J0); });
   }
 
   /// g += Jᵀr and H += JᵀJ at the recorded offsets (free parameters only).
   void accumulate(const Residual& r, const Jacobians& jac, double* H, double* g) const {
+    // Jᵀ of every free parameter stored column-major, so that Jᵀr and JᵀJ are products with a
+    // column-major left factor (vectorised by Eigen) and the results are added column by column.
+    std::tuple<Eigen::Matrix<double, Manifold<Params>::kDoF, kNumResiduals>...> Jt;
     detail::static_for<sizeof...(Params)>([&](auto k) {
       constexpr std::size_t K = decltype(k)::value;
       if (col_[K] < 0) return;
-      const auto& Jk = std::get<K>(jac);
-      Eigen::Map<Eigen::Matrix<double, kDoF<K>, 1>>(g + col_[K]).noalias() += Jk.transpose() * r;
+      std::get<K>(Jt) = std::get<K>(jac).transpose();
+      Eigen::Map<Eigen::Matrix<double, kDoF<K>, 1>>(g + col_[K]).noalias() += std::get<K>(Jt) * r;
+    });
+    detail::static_for<sizeof...(Params)>([&](auto k) {
+      constexpr std::size_t K = decltype(k)::value;
+      if (col_[K] < 0) return;
       detail::static_for<sizeof...(Params)>([&](auto l) {
         constexpr std::size_t L = decltype(l)::value;
         if constexpr (L >= K) {
           if (col_[L] < 0) return;
           const int p = pair_index(K, L);
-          const auto& Jl = std::get<L>(jac);
           if constexpr (L == K) {
-            Eigen::Map<Eigen::Matrix<double, kDoF<K>, kDoF<K>>, 0, Eigen::OuterStride<>> B(
-                H + off_[p], Eigen::OuterStride<>(stride_[p]));
-            B.noalias() += Jk.transpose() * Jk;
+            Eigen::Matrix<double, kDoF<K>, kDoF<K>> M;
+            M.noalias() = std::get<K>(Jt) * std::get<K>(jac);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           } else if (col_[K] < col_[L]) {
-            Eigen::Map<Eigen::Matrix<double, kDoF<K>, kDoF<L>>, 0, Eigen::OuterStride<>> B(
-                H + off_[p], Eigen::OuterStride<>(stride_[p]));
-            B.noalias() += Jk.transpose() * Jl;
+            Eigen::Matrix<double, kDoF<K>, kDoF<L>> M;
+            M.noalias() = std::get<K>(Jt) * std::get<L>(jac);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           } else {
-            Eigen::Map<Eigen::Matrix<double, kDoF<L>, kDoF<K>>, 0, Eigen::OuterStride<>> B(
-                H + off_[p], Eigen::OuterStride<>(stride_[p]));
-            B.noalias() += Jl.transpose() * Jk;
+            Eigen::Matrix<double, kDoF<L>, kDoF<K>> M;
+            M.noalias() = std::get<L>(Jt) * std::get<K>(jac);
+            detail::add_block(H + off_[p], stride_[p], M, assign_[p]);
           }
         }
       });
@@ -214,6 +281,32 @@ class ResidualBlock {
     return true;
   }
 
+  /// The linked accumulation (see "Linked Jacobians"), from evaluate_linked()'s r̃, J̃_0 and G.
+  template <typename G>
+  void accumulate_linked(const Residual& r, const FirstJacobian& J0, const G& link, double* H,
+                         double* g) const {
+    constexpr int D = kDoF<0>;
+    static_assert(kDoF<1> == D && G::kDoF == D, "linked parameters must have the group's DoF");
+    using Mat = Eigen::Matrix<double, D, D>;
+    using Vec = Eigen::Matrix<double, D, 1>;
+    const Eigen::Matrix<double, D, kNumResiduals> Jt = J0.transpose();
+    const Vec u = Jt * r;
+    Mat M;
+    M.noalias() = Jt * J0;                  // H_ii contribution
+    const Mat N = link.times_adjoint(M);    // −H_ij = H_ii'·Ad(G)
+    const Mat Nt = N.transpose();           // Ad(G)ᵀ·H_ii'
+    const Mat Mj = link.times_adjoint(Nt);  // H_jj contribution Ad(G)ᵀ·H_ii'·Ad(G)
+    Eigen::Map<Vec>(g + col_[0]) += u;
+    Eigen::Map<Vec>(g + col_[1]) -= link.adjoint_transpose_times(u);
+    constexpr int p00 = pair_index(0, 0), p01 = pair_index(0, 1), p11 = pair_index(1, 1);
+    detail::add_block(H + off_[p00], stride_[p00], M, assign_[p00]);
+    detail::add_block(H + off_[p11], stride_[p11], Mj, assign_[p11]);
+    if (col_[0] < col_[1])  // block rows of parameter 0
+      detail::subtract_block(H + off_[p01], stride_[p01], N, assign_[p01]);
+    else  // block rows of parameter 1
+      detail::subtract_block(H + off_[p01], stride_[p01], Nt, assign_[p01]);
+  }
+
  private:
   template <std::size_t... I>
   bool call(Residual& r, Jacobians* jac, std::index_sequence<I...>) const {
@@ -221,13 +314,42 @@ class ResidualBlock {
                     (jac && col_[I] >= 0 ? &std::get<I>(*jac) : nullptr)...);
   }
 
-  void apply_weight(const SqrtInformation* W, Jacobians& jac) const {
-    detail::static_for<sizeof...(Params)>([&](auto k) {
-      if (col_[k] < 0) return;
-      auto& Jk = std::get<k>(jac);
+  /// Shared tail of evaluate() / evaluate_linked(): r ← W·r (copied to *weighted if non-null),
+  /// cost ½ρ(|r|²), and (with_jac)
+  /// each free Jacobian J ← W·J then the Triggs correction of J and r. for_each(fn) calls fn on
+  /// every free Jacobian.
+  template <typename ForEach>
+  bool weigh(const SqrtInformation* sqrt_infos, double* cost, Residual* r, bool with_jac,
+             Residual* weighted, const ForEach& for_each) const {
+    if (!r->allFinite()) return false;
+    const SqrtInformation* W = sqrt_info_index_ >= 0 ? &sqrt_infos[sqrt_info_index_] : nullptr;
+    if (W) {
+      *r = ((*W) * (*r)).eval();
+    }
+    if (sqrt_weight_ != 1.0) *r *= sqrt_weight_;
+    if (weighted) *weighted = *r;
+    const auto weight = [&](auto& Jk) {
       if (W) Jk = ((*W) * Jk).eval();
       if (sqrt_weight_ != 1.0) Jk *= sqrt_weight_;
-    });
+    };
+    const double s = r->squaredNorm();
+    if (loss_.is_trivial()) {
+      *cost = 0.5 * s;
+      if (with_jac) for_each(weight);
+      return std::isfinite(*cost);
+    }
+    double rho[3];
+    loss_.evaluate(s, rho);
+    *cost = 0.5 * rho[0];
+    if (with_jac) {
+      const TriggsCorrector corr(s, rho);
+      for_each([&](auto& Jk) {
+        weight(Jk);
+        corr.correct_jacobian(*r, Jk);
+      });
+      corr.correct_residual(*r);
+    }
+    return std::isfinite(*cost);
   }
 
   Functor functor_;

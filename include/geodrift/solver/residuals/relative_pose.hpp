@@ -22,17 +22,21 @@ namespace geodrift::solver {
 ///
 ///   J_r_Si = Jl⁻¹(r)·Ad(dS_ij)       (dS·exp(d)·S_i·S_j⁻¹ = exp(Ad(dS)·d)·E)
 ///   J_r_Sj = −Jl⁻¹(r)·Ad(E)          (E·exp(−d) = exp(−Ad(E)·d)·E),  E = dS_ij·S_i·S_j⁻¹
+///          = −J_r_Si·Ad(G),  G = S_i·S_j⁻¹   (Ad(E) = Ad(dS_ij)·Ad(G))
+/// The last form is declared to ResidualBlock (LinkGroup, linked()): H_ij, H_jj and g_j are
+/// then accumulated from J̃_i alone (residual_block.hpp, "Linked Jacobians").
 template <typename Group>
 struct RelativePoseResidual {
   static constexpr int kNumResiduals = Group::kDoF;
   using Vec = Eigen::Matrix<double, Group::kDoF, 1>;
   using Mat = Eigen::Matrix<double, Group::kDoF, Group::kDoF>;
+  using LinkGroup = Group;
 
   Group dS_ij;  ///< measurement (see above)
 
   bool operator()(const Group& S_i, const Group& S_j, Vec* r, Mat* J_r_Si = nullptr,
                   Mat* J_r_Sj = nullptr) const {
-    const Group E = dS_ij * S_i * S_j.inverse();
+    const Group E = dS_ij * (S_i * S_j.inverse());
     if (!J_r_Si && !J_r_Sj) {
       *r = E.log();
       return true;
@@ -41,6 +45,16 @@ struct RelativePoseResidual {
     *r = E.log(&Jl_inv);
     if (J_r_Si) *J_r_Si = dS_ij.times_adjoint(Jl_inv);  // Jl⁻¹·Ad(dS_ij)
     if (J_r_Sj) *J_r_Sj = -E.times_adjoint(Jl_inv);     // −Jl⁻¹·Ad(E)
+    return true;
+  }
+
+  /// r and J_r_Si as operator(), and the link G = S_i·S_j⁻¹ with J_r_Sj = −J_r_Si·Ad(G).
+  bool linked(const Group& S_i, const Group& S_j, Vec* r, Mat* J_r_Si, Group* G) const {
+    *G = S_i * S_j.inverse();
+    const Group E = dS_ij * (*G);
+    Mat Jl_inv;
+    *r = E.log(&Jl_inv);
+    *J_r_Si = dS_ij.times_adjoint(Jl_inv);
     return true;
   }
 };
