@@ -4,7 +4,6 @@
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cmath>
-#include <cstdint>
 #include <limits>
 #include <random>
 #include <string>
@@ -14,7 +13,6 @@
 #include "geodrift/solver/block_structure.hpp"
 #include "geodrift/solver/cholmod_solver.hpp"
 #include "geodrift/solver/dense_solver.hpp"
-#include "geodrift/solver/huge_page_allocator.hpp"
 #include "geodrift/solver/levenberg_marquardt.hpp"
 #include "geodrift/solver/loss.hpp"
 #include "geodrift/solver/manifold.hpp"
@@ -502,20 +500,4 @@ TEST_CASE("Options::check_jacobians catches a wrong analytic Jacobian", "[solver
   CHECK(s.termination == Termination::kJacobianCheckFailed);
   CHECK_THAT(s.message, Catch::Contains("residual block 1"));
   CHECK(bad == before);  // states restored after the numeric differences
-}
-
-TEST_CASE("HugePageAllocator: large arrays 2 MiB aligned, small ones 64-byte aligned, values kept",
-          "[solver]") {
-  std::vector<double, solver::HugePageAllocator<double>> big(
-      solver::kHugePageThreshold / sizeof(double) + 3, 1.5);
-  CHECK(reinterpret_cast<std::uintptr_t>(big.data()) % solver::kHugePageSize == 0);
-  std::vector<Eigen::Matrix<double, 7, 7>, solver::HugePageAllocator<Eigen::Matrix<double, 7, 7>>>
-      small(3, Eigen::Matrix<double, 7, 7>::Constant(2.0));
-  CHECK(reinterpret_cast<std::uintptr_t>(small.data()) % 64 == 0);
-  big.back() = 4.0;
-  big.resize(big.size() * 2, -1.0);  // reallocation copies the values
-  CHECK(big.front() == 1.5);
-  CHECK(big[solver::kHugePageThreshold / sizeof(double) + 2] == 4.0);
-  CHECK(big.back() == -1.0);
-  CHECK(small[2](6, 6) == 2.0);
 }
