@@ -2,6 +2,7 @@
 #include "geodrift/correction/corrector.hpp"
 
 #include <catch2/catch.hpp>
+#include <limits>
 #include <random>
 
 using namespace geodrift;
@@ -237,4 +238,60 @@ TEST_CASE("Corrector refuses a pose covariance with a negative variance", "[corr
   corr.keyframe = k.id;
   corr.pose_cov(4, 4) = -1;
   CHECK_THROWS_WITH(c.add_correspondence(corr), Catch::Contains("negative variance"));
+}
+
+TEST_CASE("The two-pass BA leaves gross outlier observations out of its second pass",
+          "[correction]") {
+  // Drift-free scene, exact pixels, except 6 observations of keyframes 62-67 moved by 40 px
+  // (a wrong match each). Pass 1 (plain least squares) is pulled by them; the χ² gate at
+  // ba_huber_px drops them and pass 2 puts the path back in place.
+  ExactScene s = make_exact_scene(90, {10, 20, 30, 40, 60, 75, 89});
+  int moved = 0;
+  for (auto& o : s.obs)
+    if (o.keyframe >= 62 && o.keyframe <= 67 && o.keyframe - 62 == moved) {
+      o.pixel += Eigen::Vector2d(40.0, -10.0);
+      ++moved;
+    }
+  REQUIRE(moved == 6);
+  for (auto mode : {correction::Mode::kInitBa, correction::Mode::kOurs}) {
+    double err[2];
+    int gated[2] = {0, 0};
+    for (bool two_pass : {false, true}) {
+      correction::CorrectorOptions opt;
+      opt.mode = mode;
+      opt.ba_two_pass = two_pass;
+      correction::Corrector c(opt);
+      feed(&c, s);
+      REQUIRE(c.initialized());
+      err[two_pass] = mean_2d_error(c, s);
+      int second_passes = 0;
+      for (const auto& r : c.reports())
+        if (r.kind == "ba") {
+          gated[two_pass] += r.gated_observations;
+          second_passes += r.passes == 2;
+          if (!two_pass) CHECK(r.passes == 1);
+          CHECK(r.huber_px == (r.passes == 2 ? 0.0 : opt.ba_huber_px * !two_pass));
+        }
+      // Pass 2 runs in the windows that see a wrong observation (keyframes 62-67), only there.
+      if (two_pass) CHECK(second_passes >= 1);
+    }
+    INFO("mode " << correction::to_string(mode) << ": mean 2D error one pass (Huber) " << err[0]
+                 << " m, two passes " << err[1] << " m; gated " << gated[1]);
+    CHECK(gated[0] == 0);
+    CHECK(gated[1] >= 6);  // each wrong observation, in every window that sees it
+    CHECK(err[1] < 2e-3);
+    CHECK(err[0] < 2e-2);
+  }
+}
+
+TEST_CASE("Corrector validates the two-pass BA options", "[correction]") {
+  correction::CorrectorOptions bad;
+  bad.ba_first_pass_huber_px = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_first_pass_huber_px"));
+  bad = {};
+  bad.ba_huber_px = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_huber_px"));
+  bad = {};
+  bad.ba_outlier_px = 1.0;  // below the gate
+  CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("ba_outlier_px"));
 }

@@ -2,6 +2,8 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdlib>
+#include <string>
 
 #include "geodrift/correction/replay.hpp"
 #include "geodrift/eval/errors.hpp"
@@ -18,10 +20,17 @@ struct Outcome {
   std::vector<Eigen::Vector3d> centres;
 };
 
+bool reduced() {
+  const char* ci = std::getenv("CI");
+  const char* r = std::getenv("GEODRIFT_REDUCED");
+  return (ci && std::string(ci) == "true") || (r && std::string(r) == "1");
+}
+
 Outcome run(const sim::SimulatedSequence& s, const std::vector<map::Correspondence>& corr,
-            correction::Mode mode) {
+            correction::Mode mode, bool ba_two_pass = true) {
   correction::CorrectorOptions opt;
   opt.mode = mode;
+  opt.ba_two_pass = ba_two_pass;
   correction::Corrector c(opt);
   correction::replay(s.map, corr, &c);
   REQUIRE(c.initialized());
@@ -107,4 +116,30 @@ TEST_CASE("On a simulated stretch of KITTI 08 at interval 300, BA after PGO does
   CHECK(ours.mean_2d <= 1.05 * pgo.mean_2d);
   CHECK(ours.mean_2d <= 1.05 * batch.mean_2d);
   CHECK(ours.reprojection_rms_px < pgo.reprojection_rms_px);
+}
+
+TEST_CASE("On simulated KITTI 08 at interval 100, INIT+BA follows the anchors with the two-pass BA",
+          "[correction][sim][slow]") {
+  // INIT+BA (BA with the geo term, no PGO): each window starts with keyframes chained 80 m
+  // past the last anchor, 3-30 m from the next geo-tag. With Huber at √5.991 px throughout,
+  // the σ = 5 cm geo term tears the anchored keyframe off its (correct) observations instead
+  // of bending the map, and the path diverges (whole sequence, seed 1: 48 m). The two-pass BA
+  // (plain least squares, χ² gate, least squares; CorrectorOptions::ba_two_pass) follows the
+  // anchors. Reduced (CI): frames 0-1500 of the same seed (1.8 m against 38 m; on that stretch
+  // seed 2 still diverges with both: INIT+BA stays fragile, 22.6 m against 28.6 m).
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const sim::KittiSequence seq = sim::load_kitti_sequence(
+      dir + "/poses/08.txt", dir + "/calib_seq04-12.txt", dir + "/times/08.txt");
+  sim::SimOptions so = sim::SimOptions::kitti("08", 1);
+  if (reduced()) so.last_frame = 1500;
+  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const auto corr = sim::kitti_correspondences(s, 100);
+  REQUIRE(corr.size() >= 14);
+
+  const Outcome one = run(s, corr, correction::Mode::kInitBa, /*ba_two_pass=*/false);
+  const Outcome two = run(s, corr, correction::Mode::kInitBa, /*ba_two_pass=*/true);
+  INFO("INIT+BA mean 2D error: one pass (Huber) " << one.mean_2d << " m, two passes " << two.mean_2d
+                                                  << " m");
+  CHECK(two.mean_2d < 2.5);
+  CHECK(one.mean_2d > 10.0 * two.mean_2d);
 }
