@@ -26,7 +26,8 @@
 // and correspondences, so floor and Ours are paired seed by seed.
 //
 // usage: correction_floor [--sequences 02,08] [--intervals 100,...] [--seeds 1-20]
-//                         [--report-seeds 5] [--ours] [--mode full|nodrift|scale|ou]
+//                         [--report-seeds 5] [--ours] [--pnp-offsets] [--mode
+//                         full|nodrift|scale|ou]
 //                         [--sigma-t 1e-4] [--data-dir data/kitti]
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -73,11 +74,15 @@ struct Model {
   std::vector<Vector3d> sig_phi;  ///< φ_k SD per camera axis, step k
   bool rotation_drift = true;     ///< false: one R_Q for all keyframes (no rotation drift)
   bool scale_walk = true;         ///< false: no random walk (w shared, fixed)
+  double ou_coef = 1.0;           ///< 0: the OU part is left out of the scale (prior ablations)
   double sigma_t = 1e-4;          ///< penalty SD of the exact translation direction [m]
   struct Anchor {
     int K = 0;
     Vector3d p_off = Vector3d::Zero();  ///< geo-tagged camera centre in K's true camera frame
-    Vector3d y = Vector3d::Zero();      ///< geo-tag position, KITTI frame
+    /// false: p_off is exact, in metres (the oracle); true: p_off is the PnP-localised view
+    /// centre in K's drifted camera frame, in MAP units, turned into metres by K's scale.
+    bool map_units = false;
+    Vector3d y = Vector3d::Zero();  ///< geo-tag position, KITTI frame
     double sigma = 0.05;
   };
   std::vector<Anchor> anchors;
@@ -143,7 +148,7 @@ double evaluate(const Model& m, const State& s, std::vector<Block>* blocks,
       const Vector3d dk = m.d[k];
       const double st = m.sigma_t;
       const auto f = [&](const VectorXd& x) -> VectorXd {
-        const double lam = g + x(11) + w1 + x(10) + o1 + x(9);
+        const double lam = g + x(11) + w1 + x(10) + m.ou_coef * (o1 + x(9));
         return ((c1 + x.segment<3>(3)) - (c0 + x.segment<3>(0)) -
                 expm(x.segment<3>(6)) * R * dk * std::exp(-lam)) /
                st;
@@ -215,16 +220,20 @@ double evaluate(const Model& m, const State& s, std::vector<Block>* blocks,
   for (const auto& an : m.anchors) {
     Block b;
     const int K = an.K;
-    b.idx = {m.ic(K), m.ic(K) + 1, m.ic(K) + 2, m.ith(K), m.ith(K) + 1, m.ith(K) + 2};
+    b.idx = {m.ic(K),      m.ic(K) + 1, m.ic(K) + 2, m.ith(K), m.ith(K) + 1,
+             m.ith(K) + 2, m.io(K),     m.iw(K),     m.ig()};
     const Vector3d cK = s.c[K];
     const Matrix3d R = s.RQ[m.slot_r(K)] * m.Rm[K];
+    const double lamK = s.g + s.w[m.slot_w(K)] + m.ou_coef * s.o[K];
     const auto f = [&](const VectorXd& x) -> VectorXd {
-      return ((cK + x.segment<3>(0)) + expm(x.segment<3>(3)) * R * an.p_off - an.y) / an.sigma;
+      const double to_m = an.map_units ? std::exp(-(lamK + x(8) + x(7) + m.ou_coef * x(6))) : 1.0;
+      return ((cK + x.segment<3>(0)) + expm(x.segment<3>(3)) * R * an.p_off * to_m - an.y) /
+             an.sigma;
     };
     if (jac) {
-      numeric(f, 6, &b);
+      numeric(f, 9, &b);
     } else {
-      b.r = f(VectorXd::Zero(6));
+      b.r = f(VectorXd::Zero(9));
     }
     add(4, std::move(b));
   }
@@ -244,7 +253,7 @@ State retract(const Model& m, const State& s, const VectorXd& dx) {
   // σ_t only linearises the constraint in the normal equations.
   for (int k = 0; k + 1 < m.n; ++k)
     t.c[k + 1] = t.c[k] + t.RQ[m.slot_r(k)] * m.d[k] *
-                              std::exp(-(t.g + t.w[m.slot_w(k + 1)] + t.o[k + 1]));
+                              std::exp(-(t.g + t.w[m.slot_w(k + 1)] + m.ou_coef * t.o[k + 1]));
   return t;
 }
 
@@ -319,6 +328,15 @@ SolveReport solve(const Model& m, State* s) {
 /// Which variant of the model (sanity checks) is simulated and assumed.
 enum class Variant { kFull, kNoDrift, kScaleOnly, kOuOnly };
 
+/// --prior-rot true|dist|const: rotation-drift SD per step as simulated, or the same total
+/// variance spread by distance / evenly over keyframe steps (no turn weighting).
+/// --prior-scale true|rw: the log-scale as simulated (random walk + OU), or a pure random walk
+/// with the same one-step variance (no correlation of the fluctuation).
+struct PriorAblation {
+  std::string rot = "true";
+  std::string scale = "true";
+};
+
 struct Run {
   std::vector<double> floor_err;  ///< per interval
   std::vector<double> ours_err;   ///< per interval (NaN without --ours)
@@ -330,7 +348,8 @@ struct Run {
 };
 
 Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
-            const std::vector<int>& intervals, Variant variant, double sigma_t, bool ours) {
+            const std::vector<int>& intervals, Variant variant, double sigma_t, bool ours,
+            const PriorAblation& prior, bool pnp_offsets) {
   Run out;
   // The simulation exactly as `geodrift experiment` makes it (or a sanity-check variant).
   const sim::SimOptions kitti = sim::SimOptions::kitti(name, seed);
@@ -394,6 +413,31 @@ Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned see
           gamma * std::sqrt(P.rotation_random_walk(i) * P.rotation_random_walk(i) * dd +
                             P.turn_rotation_error * P.turn_rotation_error * turn * turn);
   }
+  // Prior ablations (a mis-specified prior, the simulation unchanged): what the Bayes estimator
+  // gains from each part of the true model. The total prior variance over the path is kept.
+  if (prior.rot != "true" && m.rotation_drift) {
+    Vector3d total = Vector3d::Zero();
+    double dist = 0;
+    for (int k = 0; k + 1 < n; ++k) {
+      total += m.sig_phi[k].cwiseAbs2();
+      dist += (T[k + 1].translation() - T[k].translation()).norm();
+    }
+    for (int k = 0; k + 1 < n; ++k) {
+      const double dd = (T[k + 1].translation() - T[k].translation()).norm();
+      const double share = prior.rot == "dist" ? dd / dist : 1.0 / (n - 1);
+      m.sig_phi[k] = (total * share).cwiseSqrt();
+    }
+  }
+  if (prior.scale == "rw") {  // λ a pure random walk with the true one-step variance of Δλ
+    m.scale_walk = true;
+    m.ou_coef = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      const double dd = (T[k + 1].translation() - T[k].translation()).norm();
+      m.sig_w[k] =
+          std::sqrt(beta * beta * P.scale_random_walk * P.scale_random_walk * dd +
+                    2.0 * P.scale_fluctuation_sd * P.scale_fluctuation_sd * (1.0 - m.a[k]));
+    }
+  }
   const Matrix3d R_WK = geodrift::geo::kitti_to_world_rotation();
   const auto truth_state = [&]() {
     const sim::detail::DriftDraws dr = sim::detail::draw_drift(T, s.options.drift, s.options.seed);
@@ -428,6 +472,10 @@ Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned see
       Eigen::Isometry3d T_K_r = s.sequence.T_K_c[f];
       T_K_r.translation() += T_K_r.linear().col(0) * s.sequence.baseline_m;
       an.p_off = T[an.K].inverse() * T_K_r.translation();
+      if (pnp_offsets) {  // what a real correction has: the view localised in the drifted map
+        an.map_units = true;
+        an.p_off = c.T_vk.inverse().translation();  // view centre in K's camera frame, map units
+      }
       an.y = R_WK.transpose() * c.y_w;
       an.sigma = c.sigma_m;
       if (s.options.geotag_noise_m == 0.0) an.sigma = 0.05;  // noise-free check: any weight
@@ -509,23 +557,33 @@ double sdev(const std::vector<double>& v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::map<std::string, std::string> a{
-      {"sequences", "02,08"},    {"intervals", "100,200,300,400,500"},
-      {"seeds", "20"},           {"report-seeds", "5"},
-      {"mode", "full"},          {"sigma-t", "1e-4"},
-      {"data-dir", "data/kitti"}};
-  bool ours = false;
+  std::map<std::string, std::string> a{{"sequences", "02,08"},
+                                       {"intervals", "100,200,300,400,500"},
+                                       {"seeds", "20"},
+                                       {"report-seeds", "5"},
+                                       {"mode", "full"},
+                                       {"sigma-t", "1e-4"},
+                                       {"data-dir", "data/kitti"},
+                                       {"prior-rot", "true"},
+                                       {"prior-scale", "true"}};
+  bool ours = false, pnp_offsets = false, straight = false;
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     if (k == "--ours") {
       ours = true;
+    } else if (k == "--pnp-offsets") {
+      pnp_offsets = true;
+    } else if (k == "--straight") {
+      straight = true;
     } else if (k.rfind("--", 0) == 0 && i + 1 < argc && a.count(k.substr(2))) {
       a[k.substr(2)] = argv[++i];
     } else {
-      std::fprintf(stderr,
-                   "usage: correction_floor [--sequences 02,08] [--intervals 100,...] "
-                   "[--seeds N (1..N)] [--report-seeds 5] [--ours] [--mode "
-                   "full|nodrift|scale|ou] [--sigma-t 1e-4] [--data-dir data/kitti]\n");
+      std::fprintf(
+          stderr,
+          "usage: correction_floor [--sequences 02,08] [--intervals 100,...] "
+          "[--seeds N (1..N)] [--report-seeds 5] [--ours] [--pnp-offsets] [--straight] [--mode "
+          "full|nodrift|scale|ou] [--prior-rot true|dist|const] [--prior-scale "
+          "true|rw] [--sigma-t 1e-4] [--data-dir data/kitti]\n");
       return 2;
     }
   }
@@ -539,14 +597,26 @@ int main(int argc, char** argv) {
     return 2;
   }
   const Variant variant = modes.at(a["mode"]);
+  PriorAblation prior;
+  prior.rot = a["prior-rot"];
+  prior.scale = a["prior-scale"];
+  if ((prior.rot != "true" && prior.rot != "dist" && prior.rot != "const") ||
+      (prior.scale != "true" && prior.scale != "rw")) {
+    std::fprintf(stderr, "correction_floor: --prior-rot true|dist|const, --prior-scale true|rw\n");
+    return 2;
+  }
   std::vector<int> intervals;
   for (const auto& t : split(a["intervals"])) intervals.push_back(std::stoi(t));
   const int nseeds = std::stoi(a["seeds"]);
   const std::size_t report = static_cast<std::size_t>(std::stoi(a["report-seeds"]));
   const double sigma_t = std::stod(a["sigma-t"]);
   const auto t0 = std::chrono::steady_clock::now();
-  std::printf("correction_floor: mode %s, seeds 1..%d, sigma_t %g m%s\n", a["mode"].c_str(), nseeds,
-              sigma_t, ours ? ", with Ours" : "");
+  std::printf(
+      "correction_floor: mode %s, prior rotation %s, prior scale %s, seeds 1..%d, "
+      "sigma_t %g m%s%s%s\n",
+      a["mode"].c_str(), prior.rot.c_str(), prior.scale.c_str(), nseeds, sigma_t,
+      ours ? ", with Ours" : "", pnp_offsets ? ", PnP keyframe->view offsets (not the oracle)" : "",
+      straight ? ", STRAIGHT path with the sequence's speed profile" : "");
   struct Row {
     std::string seq;
     int interval;
@@ -556,13 +626,24 @@ int main(int argc, char** argv) {
   for (const auto& name : split(a["sequences"])) {
     const std::string dir = a["data-dir"];
     const std::string calib = dir + (name == "02" ? "/calib_seq00-02.txt" : "/calib_seq04-12.txt");
-    const sim::KittiSequence seq = sim::load_kitti_sequence(dir + "/poses/" + name + ".txt", calib,
-                                                            dir + "/times/" + name + ".txt");
+    sim::KittiSequence seq = sim::load_kitti_sequence(dir + "/poses/" + name + ".txt", calib,
+                                                      dir + "/times/" + name + ".txt");
+    if (straight) {
+      // The same speed profile on a straight road (a 2 m, 1 km height undulation keeps the
+      // anchors off one line, so the gauge stays observable): the 1D case of round 4's estimate.
+      double arc = 0;
+      std::vector<Eigen::Isometry3d> T(seq.T_K_c.size(), Eigen::Isometry3d::Identity());
+      for (std::size_t f = 0; f < T.size(); ++f) {
+        if (f > 0) arc += (seq.T_K_c[f].translation() - seq.T_K_c[f - 1].translation()).norm();
+        T[f].translation() = Vector3d(0.0, 2.0 * std::sin(2.0 * M_PI * arc / 1000.0), arc);
+      }
+      seq.T_K_c = T;
+    }
     std::vector<Row> r(intervals.size());
     for (std::size_t i = 0; i < intervals.size(); ++i) r[i] = {name, intervals[i], {}, {}};
     for (int seed = 1; seed <= nseeds; ++seed) {
-      const Run run =
-          run_one(seq, name, static_cast<unsigned>(seed), intervals, variant, sigma_t, ours);
+      const Run run = run_one(seq, name, static_cast<unsigned>(seed), intervals, variant, sigma_t,
+                              ours, prior, pnp_offsets);
       for (std::size_t i = 0; i < intervals.size(); ++i) {
         r[i].floor.push_back(run.floor_err[i]);
         r[i].ours.push_back(run.ours_err[i]);
