@@ -349,7 +349,7 @@ struct Run {
 
 Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
             const std::vector<int>& intervals, Variant variant, double sigma_t, bool ours,
-            const PriorAblation& prior, bool pnp_offsets) {
+            const PriorAblation& prior, bool pnp_offsets, bool pnp_sigma) {
   Run out;
   // The simulation exactly as `geodrift experiment` makes it (or a sanity-check variant).
   const sim::SimOptions kitti = sim::SimOptions::kitti(name, seed);
@@ -463,7 +463,20 @@ Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned see
   };
 
   for (int interval : intervals) {
-    const auto corr = sim::kitti_correspondences(s, interval);
+    std::vector<sim::GeoView> views;
+    const auto corr = sim::kitti_correspondences(s, interval, &views);
+    // --pnp-offsets with --pnp-sigma: the geo-tag SD widened by the RMS localisation error of
+    // this run's views (one weight for all views: a calibration of the weight, not per view).
+    double loc_rms = 0;
+    {
+      int cnt = 0;
+      for (const auto& v : views)
+        if (v.localized) {
+          loc_rms += v.position_error_m * v.position_error_m;
+          ++cnt;
+        }
+      loc_rms = cnt ? std::sqrt(loc_rms / cnt) : 0.0;
+    }
     m.anchors.clear();
     for (const auto& c : corr) {
       Model::Anchor an;
@@ -478,6 +491,7 @@ Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned see
       }
       an.y = R_WK.transpose() * c.y_w;
       an.sigma = c.sigma_m;
+      if (pnp_offsets && pnp_sigma) an.sigma = std::hypot(c.sigma_m, loc_rms);
       if (s.options.geotag_noise_m == 0.0) an.sigma = 0.05;  // noise-free check: any weight
       m.anchors.push_back(an);
     }
@@ -566,24 +580,26 @@ int main(int argc, char** argv) {
                                        {"data-dir", "data/kitti"},
                                        {"prior-rot", "true"},
                                        {"prior-scale", "true"}};
-  bool ours = false, pnp_offsets = false, straight = false;
+  bool ours = false, pnp_offsets = false, pnp_sigma = false, straight = false;
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     if (k == "--ours") {
       ours = true;
     } else if (k == "--pnp-offsets") {
       pnp_offsets = true;
+    } else if (k == "--pnp-sigma") {
+      pnp_sigma = true;
     } else if (k == "--straight") {
       straight = true;
     } else if (k.rfind("--", 0) == 0 && i + 1 < argc && a.count(k.substr(2))) {
       a[k.substr(2)] = argv[++i];
     } else {
-      std::fprintf(
-          stderr,
-          "usage: correction_floor [--sequences 02,08] [--intervals 100,...] "
-          "[--seeds N (1..N)] [--report-seeds 5] [--ours] [--pnp-offsets] [--straight] [--mode "
-          "full|nodrift|scale|ou] [--prior-rot true|dist|const] [--prior-scale "
-          "true|rw] [--sigma-t 1e-4] [--data-dir data/kitti]\n");
+      std::fprintf(stderr,
+                   "usage: correction_floor [--sequences 02,08] [--intervals 100,...] "
+                   "[--seeds N (1..N)] [--report-seeds 5] [--ours] [--pnp-offsets [--pnp-sigma]] "
+                   "[--straight] [--mode "
+                   "full|nodrift|scale|ou] [--prior-rot true|dist|const] [--prior-scale "
+                   "true|rw] [--sigma-t 1e-4] [--data-dir data/kitti]\n");
       return 2;
     }
   }
@@ -643,7 +659,7 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < intervals.size(); ++i) r[i] = {name, intervals[i], {}, {}};
     for (int seed = 1; seed <= nseeds; ++seed) {
       const Run run = run_one(seq, name, static_cast<unsigned>(seed), intervals, variant, sigma_t,
-                              ours, prior, pnp_offsets);
+                              ours, prior, pnp_offsets, pnp_sigma);
       for (std::size_t i = 0; i < intervals.size(); ++i) {
         r[i].floor.push_back(run.floor_err[i]);
         r[i].ours.push_back(run.ours_err[i]);
