@@ -349,7 +349,7 @@ struct Run {
 
 Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
             const std::vector<int>& intervals, Variant variant, double sigma_t, bool ours,
-            const PriorAblation& prior, bool pnp_offsets, bool pnp_sigma) {
+            const PriorAblation& prior, bool pnp_offsets, bool pnp_sigma, bool observed_variances) {
   Run out;
   // The simulation exactly as `geodrift experiment` makes it (or a sanity-check variant).
   const sim::SimOptions kitti = sim::SimOptions::kitti(name, seed);
@@ -399,12 +399,22 @@ Run run_one(const sim::KittiSequence& seq, const std::string& name, unsigned see
   m.sig_o.assign(n, P.scale_fluctuation_sd);
   m.sig_w.assign(n, 1.0);
   m.sig_phi.assign(n, Vector3d::Ones());
+  double len_true = 0, len_map = 0;
+  for (int k = 0; k + 1 < n; ++k) {
+    len_true += (T[k + 1].translation() - T[k].translation()).norm();
+    len_map += (cm[k + 1] - cm[k]).norm();
+  }
   for (int k = 0; k + 1 < n; ++k) {
     m.d[k] = cm[k + 1] - cm[k];
     // Step length and turn of the TRUE path (the process' variances; the estimator is not
-    // given them as measurements).
-    const double dd = (T[k + 1].translation() - T[k].translation()).norm();
-    const double turn = Eigen::AngleAxisd(T[k].linear().transpose() * T[k + 1].linear()).angle();
+    // given them as measurements), or (--observed-variances) of the drifted chain, its length
+    // scaled by one global ratio.
+    double dd = (T[k + 1].translation() - T[k].translation()).norm();
+    double turn = Eigen::AngleAxisd(T[k].linear().transpose() * T[k + 1].linear()).angle();
+    if (observed_variances) {
+      dd = m.d[k].norm() * len_true / len_map;
+      turn = Eigen::AngleAxisd(m.Rm[k].transpose() * m.Rm[k + 1]).angle();
+    }
     m.a[k] = std::exp(-dd / P.scale_fluctuation_length_m);
     m.sig_o[k + 1] = P.scale_fluctuation_sd * std::sqrt(1.0 - m.a[k] * m.a[k]);
     m.sig_w[k] = beta * P.scale_random_walk * std::sqrt(dd);
@@ -581,6 +591,7 @@ int main(int argc, char** argv) {
                                        {"prior-rot", "true"},
                                        {"prior-scale", "true"}};
   bool ours = false, pnp_offsets = false, pnp_sigma = false, straight = false;
+  bool observed_variances = false;
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     if (k == "--ours") {
@@ -589,6 +600,8 @@ int main(int argc, char** argv) {
       pnp_offsets = true;
     } else if (k == "--pnp-sigma") {
       pnp_sigma = true;
+    } else if (k == "--observed-variances") {
+      observed_variances = true;
     } else if (k == "--straight") {
       straight = true;
     } else if (k.rfind("--", 0) == 0 && i + 1 < argc && a.count(k.substr(2))) {
@@ -597,7 +610,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: correction_floor [--sequences 02,08] [--intervals 100,...] "
                    "[--seeds N (1..N)] [--report-seeds 5] [--ours] [--pnp-offsets [--pnp-sigma]] "
-                   "[--straight] [--mode "
+                   "[--observed-variances] [--straight] [--mode "
                    "full|nodrift|scale|ou] [--prior-rot true|dist|const] [--prior-scale "
                    "true|rw] [--sigma-t 1e-4] [--data-dir data/kitti]\n");
       return 2;
@@ -659,7 +672,7 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < intervals.size(); ++i) r[i] = {name, intervals[i], {}, {}};
     for (int seed = 1; seed <= nseeds; ++seed) {
       const Run run = run_one(seq, name, static_cast<unsigned>(seed), intervals, variant, sigma_t,
-                              ours, prior, pnp_offsets, pnp_sigma);
+                              ours, prior, pnp_offsets, pnp_sigma, observed_variances);
       for (std::size_t i = 0; i < intervals.size(); ++i) {
         r[i].floor.push_back(run.floor_err[i]);
         r[i].ours.push_back(run.ours_err[i]);
