@@ -7,7 +7,7 @@
 #include <random>
 
 #include "geodrift/correction/corrector.hpp"
-#include "geodrift/sim/detail/pnp.hpp"
+#include "geodrift/correction/pose_refinement.hpp"
 #include "support/numeric_jacobian.hpp"
 
 using namespace geodrift;
@@ -63,7 +63,7 @@ TEST_CASE("PnP pose covariance matches a Monte-Carlo estimate", "[correction][co
     for (int t = 0; t < trials; ++t) {
       std::vector<Eigen::Vector2d> u = u_true;
       for (auto& p : u) p += noise_px * Eigen::Vector2d(n01(rng), n01(rng));
-      const sim::detail::PnpResult r = sim::detail::refine_pose_lm(X, u, kCam, T_true, 50);
+      const correction::PnpResult r = correction::refine_pose_lm(X, u, kCam, T_true, 50);
       REQUIRE(r.converged);
       REQUIRE(r.covariance.ok);
       deltas.push_back((r.T_cw * T_true.inverse()).log());  // T_est = exp(δ)·T_true

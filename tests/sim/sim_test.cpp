@@ -7,10 +7,10 @@
 #include <string>
 #include <vector>
 
+#include "geodrift/correction/pose_refinement.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/geo/kitti.hpp"
 #include "geodrift/map/map.hpp"
-#include "geodrift/sim/detail/pnp.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
 #include "support/test_files.hpp"
@@ -82,7 +82,7 @@ TEST_CASE("PnP refinement on the core solver recovers the pose and minimises the
       T_true;
 
   // Exact pixels: the true pose, to machine precision.
-  const sim::detail::PnpResult exact = sim::detail::refine_pose_lm(X, u, cam, T_init, 50);
+  const correction::PnpResult exact = correction::refine_pose_lm(X, u, cam, T_init, 50);
   CHECK(exact.converged);
   CHECK(exact.iterations >= 2);
   CHECK((exact.T_cw * T_true.inverse()).log().norm() < 1e-9);
@@ -90,7 +90,7 @@ TEST_CASE("PnP refinement on the core solver recovers the pose and minimises the
 
   // 1 px noise: a minimum of the cost (no small left perturbation lowers it) with the RMS of
   // 2-D noise of 1 px per axis (√2 · √((2n − 6) / 2n) ≈ 1.4 px).
-  const sim::detail::PnpResult noisy = sim::detail::refine_pose_lm(X, u_noisy, cam, T_init, 50);
+  const correction::PnpResult noisy = correction::refine_pose_lm(X, u_noisy, cam, T_init, 50);
   CHECK(noisy.converged);
   const double c0 = reprojection_cost(noisy.T_cw, X, u_noisy, cam);
   CHECK(noisy.rms_px == Approx(std::sqrt(2.0 * c0 / X.size())).epsilon(1e-9));
@@ -106,12 +106,29 @@ TEST_CASE("PnP refinement on the core solver recovers the pose and minimises the
   // A point behind the camera at the start: nothing solved.
   std::vector<Eigen::Vector3d> Xb = X;
   Xb[7] = T_init.inverse().act(Eigen::Vector3d(0.0, 0.0, -5.0));
-  const sim::detail::PnpResult behind = sim::detail::refine_pose_lm(Xb, u, cam, T_init, 50);
+  const correction::PnpResult behind = correction::refine_pose_lm(Xb, u, cam, T_init, 50);
   CHECK_FALSE(behind.converged);
   CHECK(behind.T_cw.is_approx(T_init, 0.0));
   CHECK(std::isnan(behind.rms_px));
-  CHECK_THROWS_AS(sim::detail::refine_pose_lm(X, std::vector<Eigen::Vector2d>(3), cam, T_init),
+  CHECK_THROWS_AS(correction::refine_pose_lm(X, std::vector<Eigen::Vector2d>(3), cam, T_init),
                   InvalidArgument);
+
+  // 10 of 80 matches 40 px off (wrong matches): the Huber loss keeps the pose near the truth,
+  // plain least squares is pulled away; rms_px is the raw residual RMS either way.
+  std::vector<Eigen::Vector2d> u_bad = u_noisy;
+  for (int i = 0; i < 10; ++i) u_bad[7 * i] += Eigen::Vector2d(40.0, -40.0 * (i % 2));
+  const correction::PnpResult plain = correction::refine_pose_lm(X, u_bad, cam, T_init, 50);
+  const correction::PnpResult huber = correction::refine_pose_lm(X, u_bad, cam, T_init, 50, 2.0);
+  const double e_plain = (plain.T_cw * T_true.inverse()).log().norm();
+  const double e_huber = (huber.T_cw * T_true.inverse()).log().norm();
+  INFO("pose error plain " << e_plain << ", Huber " << e_huber);
+  CHECK(huber.converged);
+  CHECK(e_huber < 0.5 * e_plain);
+  CHECK(e_huber < 0.05);
+  CHECK(huber.rms_px ==
+        Approx(std::sqrt(2.0 * reprojection_cost(huber.T_cw, X, u_bad, cam) / X.size()))
+            .epsilon(1e-12));
+  CHECK_THROWS_AS(correction::refine_pose_lm(X, u, cam, T_init, 50, -1.0), InvalidArgument);
 }
 
 TEST_CASE("KITTI loader: io's pose reader, times file or nominal 10 Hz, P0/P1 calibration",

@@ -7,46 +7,10 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "geodrift/correction/localization_covariance.hpp"
+#include "geodrift/correction/pose_refinement.hpp"
 #include "geodrift/error.hpp"
-#include "geodrift/solver/levenberg_marquardt.hpp"
-#include "geodrift/solver/loss.hpp"
-#include "geodrift/solver/problem.hpp"
-#include "geodrift/solver/residuals/reprojection.hpp"
 
 namespace geodrift::geotag {
-
-double refine_pose(const std::vector<Eigen::Vector3d>& X, const std::vector<Eigen::Vector2d>& uv,
-                   const map::Camera& cam, double huber_px, int max_iterations, lie::SE3d* T_cw) {
-  GEODRIFT_CHECK(
-      X.size() == uv.size() && X.size() >= 3,
-      "refine_pose: " << X.size() << " points and " << uv.size() << " pixels (need equal, >= 3)");
-  std::vector<Eigen::Vector3d> points = X;  // the Problem refers to states by address
-  for (const Eigen::Vector3d& p : points)
-    if (!((*T_cw).act(p).z() > 1e-9)) return std::numeric_limits<double>::quiet_NaN();
-  solver::Problem problem;
-  const solver::RobustLoss loss =
-      huber_px > 0 ? solver::RobustLoss::huber(huber_px) : solver::RobustLoss::trivial();
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    problem.add_residual_block(
-        solver::ReprojectionResidual{cam.fx, cam.fy, cam.cx, cam.cy, uv[i], 1e-9}, loss, 1.0, T_cw,
-        &points[i]);
-    problem.set_constant(&points[i]);
-  }
-  solver::Options options;
-  options.max_iterations = max_iterations;
-  options.linear_solver = solver::LinearSolverType::kDense;
-  options.function_tolerance = 1e-12;
-  options.parameter_tolerance = 1e-12;
-  solver::LevenbergMarquardt lm(options);
-  lm.solve(&problem);
-  double ss = 0;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3d p = T_cw->act(points[i]);
-    if (!(p.z() > 1e-9)) return std::numeric_limits<double>::quiet_NaN();
-    ss += (cam.project(p) - uv[i]).squaredNorm();
-  }
-  return std::sqrt(ss / static_cast<double>(points.size()));
-}
 
 LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
                              const std::vector<Eigen::Vector2d>& uv, const map::Camera& cam,
@@ -109,7 +73,7 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
   // Robust LM on all pairs from the RANSAC pose, then re-select inliers at the refined pose and
   // finish with plain least squares on them (twice: the inlier set can still change).
   const double huber = o.ransac_threshold_px / 2.0;
-  refine_pose(X_m, uv, cam, huber, o.lm_iterations, &T);
+  T = correction::refine_pose_lm(X_m, uv, cam, T, o.lm_iterations, huber).T_cw;
   std::vector<int> idx;
   for (int round = 0; round < 2; ++round) {
     idx.clear();
@@ -125,7 +89,10 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
       Xi.push_back(X_m[i]);
       ui.push_back(uv[i]);
     }
-    r.rms_px = refine_pose(Xi, ui, cam, 0.0, o.lm_iterations, &T);
+    const correction::PnpResult refined =
+        correction::refine_pose_lm(Xi, ui, cam, T, o.lm_iterations);
+    T = refined.T_cw;
+    r.rms_px = refined.rms_px;
   }
   r.T_vm = T;
   r.inliers = static_cast<int>(idx.size());

@@ -138,14 +138,8 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
   ///   [ Q   J ]      Q = ∂(J(ω)ν)/∂ω + [J(ω)ν]x·J(ω)   (Barfoot's Q(ν, ω), closed form in
   ///                  detail::translation_rows; Taylor below kSmallAngle).
   static Jacobian left_jacobian(const Tangent& xi) {
-    const Point omega = xi.template segment<3>(kOmega);
-    const Point nu = xi.template segment<3>(kNu);
-    const detail::VCoeffs<Scalar> c = detail::se3_coeffs<Scalar>(omega.norm(), true);
-    const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
-    const Eigen::Matrix<Scalar, 3, 3> J =
-        Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
-    Eigen::Matrix<Scalar, 3, 3> Q;
-    detail::translation_rows<Scalar>(omega, nu, c, J, &Q, nullptr);
+    Eigen::Matrix<Scalar, 3, 3> J, Q;
+    left_jacobian_blocks(xi, &J, &Q);
     Jacobian Jl;
     Jl << J, Eigen::Matrix<Scalar, 3, 3>::Zero(), Q, J;
     return Jl;
@@ -155,15 +149,10 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
   ///   [ J⁻¹          0   ]
   ///   [ −J⁻¹·Q·J⁻¹   J⁻¹ ]      (J⁻¹ = Jl_SO3⁻¹(ω) in closed form).
   static Jacobian left_jacobian_inverse(const Tangent& xi) {
-    const Point omega = xi.template segment<3>(kOmega);
-    const Point nu = xi.template segment<3>(kNu);
-    const detail::VCoeffs<Scalar> c = detail::se3_coeffs<Scalar>(omega.norm(), true);
-    const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
-    const Eigen::Matrix<Scalar, 3, 3> J =
-        Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
-    Eigen::Matrix<Scalar, 3, 3> Q;
-    detail::translation_rows<Scalar>(omega, nu, c, J, &Q, nullptr);
-    const Eigen::Matrix<Scalar, 3, 3> Ji = detail::so3_left_jacobian_inverse<Scalar>(omega);
+    Eigen::Matrix<Scalar, 3, 3> J, Q;
+    left_jacobian_blocks(xi, &J, &Q);
+    const Eigen::Matrix<Scalar, 3, 3> Ji =
+        detail::so3_left_jacobian_inverse<Scalar>(xi.template segment<3>(kOmega));
     Jacobian Jli;
     Jli << Ji, Eigen::Matrix<Scalar, 3, 3>::Zero(), -Ji * Q * Ji, Ji;
     return Jli;
@@ -195,6 +184,16 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
   }
 
  private:
+  /// The blocks of left_jacobian(ξ): J = Jl_SO3(ω) and Barfoot's Q(ν, ω).
+  static void left_jacobian_blocks(const Tangent& xi, Eigen::Matrix<Scalar, 3, 3>* J,
+                                   Eigen::Matrix<Scalar, 3, 3>* Q) {
+    const Point omega = xi.template segment<3>(kOmega);
+    const detail::VCoeffs<Scalar> c = detail::se3_coeffs<Scalar>(omega.norm(), true);
+    const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
+    *J = Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
+    detail::translation_rows<Scalar>(omega, xi.template segment<3>(kNu), c, *J, Q, nullptr);
+  }
+
   struct Raw {};  // internal: inputs known finite
   SE3(const SO3<Scalar>& R, const Point& t, Raw) : R_(R), t_(t) {}
 

@@ -72,6 +72,7 @@
 #include <string>
 #include <vector>
 
+#include "geodrift/correction/pose_refinement.hpp"
 #include "geodrift/error.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/eval/scale_factor.hpp"
@@ -79,7 +80,6 @@
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/so3.hpp"
 #include "geodrift/map/map.hpp"
-#include "geodrift/sim/detail/pnp.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
 
 namespace geodrift::sim {
@@ -765,7 +765,7 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
     const double gate = 2.45 * std::max(opt.pixel_noise_px, 1.0);
     std::vector<Eigen::Vector3d> Xi = X;
     std::vector<Eigen::Vector2d> ui = u;
-    detail::PnpResult pnp = detail::refine_pose_lm(Xi, ui, cam, kf.T_cw, 50);
+    correction::PnpResult pnp = correction::refine_pose_lm(Xi, ui, cam, kf.T_cw, 50);
     for (int round = 0; round < 5; ++round) {
       std::vector<double> r(X.size());
       for (std::size_t i = 0; i < X.size(); ++i) {
@@ -786,7 +786,7 @@ inline std::vector<GeoView> localize_geo_views(const SimulatedSequence& sim,
       Xi.swap(Xn);
       ui.swap(un);
       if (static_cast<int>(Xi.size()) < opt.min_geo_view_points) break;
-      pnp = detail::refine_pose_lm(Xi, ui, cam, pnp.T_cw, 50);
+      pnp = correction::refine_pose_lm(Xi, ui, cam, pnp.T_cw, 50);
     }
     if (static_cast<int>(Xi.size()) < opt.min_geo_view_points) {
       v.failure = "geo view at frame " + std::to_string(f) + ": " + std::to_string(Xi.size()) +

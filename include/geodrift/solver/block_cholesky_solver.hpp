@@ -30,6 +30,7 @@
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <limits>
 #include <memory>
 #include <numeric>
 #include <string>
@@ -309,14 +310,20 @@ class BlockCholeskySolver final : public LinearSolver {
   /// Whether block Cholesky suits `s`: a supported block size and, with the ordering analyze()
   /// would choose, at most `max_blocks_per_column` blocks per column of L on average.
   static bool thin_factor(const BlockStructure& s, double max_blocks_per_column) {
-    if (supported_block_size(s) == 0) return false;
-    const std::vector<int> perm = choose_order(s, Ordering::kBest);
-    detail::BlockSymbolic sym;
-    detail::BlockSymbolic::build(s, perm, s.block_size(0), &sym);
-    return static_cast<double>(sym.row.size()) <= max_blocks_per_column * s.num_blocks();
+    return BlockCholeskySolver().analyze_if_thin(s, max_blocks_per_column);
   }
 
   LinearSolverStatus analyze(const BlockStructure& s) override {
+    return analyze_if_thin(s, std::numeric_limits<double>::infinity())
+               ? LinearSolverStatus::kSuccess
+               : LinearSolverStatus::kFatal;
+  }
+
+  /// analyze() for kAuto's decision in one pass (the ordering and the symbolic factor are what
+  /// the decision needs): true and analysed when `s` is supported and the factor has at most
+  /// `max_blocks_per_column` blocks per column on average; false otherwise, with nothing of the
+  /// numeric factor allocated (a thick factor goes to CHOLMOD, see LinearSolverType::kAuto).
+  bool analyze_if_thin(const BlockStructure& s, double max_blocks_per_column) {
     message_.clear();
     factor_.reset();
     B_ = supported_block_size(s);
@@ -324,16 +331,22 @@ class BlockCholeskySolver final : public LinearSolver {
       message_ =
           "block Cholesky: needs every free parameter block of size 6 or 7 and no Schur "
           "elimination";
-      return LinearSolverStatus::kFatal;
+      return false;
     }
     detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
+    if (static_cast<double>(sym_.row.size()) > max_blocks_per_column * s.num_blocks()) {
+      message_ = "block Cholesky: factor thicker than " + std::to_string(max_blocks_per_column) +
+                 " blocks per column";
+      sym_ = detail::BlockSymbolic();
+      return false;
+    }
     if (B_ == 6)
       factor_ = std::make_unique<detail::BlockFactor<6>>();
     else
       factor_ = std::make_unique<detail::BlockFactor<7>>();
     factor_->setup(&sym_);
     n_ = s.num_cols();
-    return LinearSolverStatus::kSuccess;
+    return true;
   }
 
   LinearSolverStatus factorize(const BlockSparseMatrix& H) override {

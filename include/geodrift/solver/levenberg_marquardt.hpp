@@ -368,14 +368,25 @@ class LevenbergMarquardt {
     // Linear solver + symbolic analysis (reused while the pattern is the same).
     if (options_.linear_solver == LinearSolverType::kAuto && analyzed_ && !s.same_pattern(pattern_))
       solver_.reset();  // kAuto decides again for a new pattern
-    if (!solver_) {
-      solver_ = make_solver(resolve(options_.linear_solver, s));
-      analyzed_ = false;
-    }
+    if (!solver_) analyzed_ = false;
     sum.analysis_reused = analyzed_ && s.same_pattern(pattern_);
     if (!sum.analysis_reused) {
       const auto t0 = Clock::now();
-      const LinearSolverStatus st = solver_->analyze(s);
+      LinearSolverStatus st = LinearSolverStatus::kSuccess;
+      if (!solver_ && options_.linear_solver == LinearSolverType::kAuto) {
+        // kAuto decides on the block Cholesky's own ordering and symbolic factor, kept when
+        // the factor is thin (one analysis, not one to decide and one to use).
+        auto block = std::make_unique<BlockCholeskySolver>();
+        if (block->analyze_if_thin(s, kAutoMaxBlocksPerColumn)) {
+          solver_ = std::move(block);
+        } else {
+          solver_ = std::make_unique<CholmodSolver>();
+          st = solver_->analyze(s);
+        }
+      } else {
+        if (!solver_) solver_ = make_solver(options_.linear_solver);
+        st = solver_->analyze(s);
+      }
       sum.time_analyze = std::chrono::duration<double>(Clock::now() - t0).count();
       if (st != LinearSolverStatus::kSuccess) {
         analyzed_ = false;
@@ -639,15 +650,6 @@ class LevenbergMarquardt {
         break;
     }
     return std::make_unique<CholmodSolver>();
-  }
-
-  /// kAuto's choice for structure s (see LinearSolverType::kAuto); other types unchanged.
-  static LinearSolverType resolve(LinearSolverType t, const BlockStructure& s) {
-    if (t != LinearSolverType::kAuto) return t;
-    if (BlockCholeskySolver::supported_block_size(s) == 0) return LinearSolverType::kCholmod;
-    return BlockCholeskySolver::thin_factor(s, kAutoMaxBlocksPerColumn)
-               ? LinearSolverType::kBlockCholesky
-               : LinearSolverType::kCholmod;
   }
 
   Options options_;

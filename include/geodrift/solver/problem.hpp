@@ -218,8 +218,9 @@ class ResidualContainerBase {
   virtual int id(int k) const = 0;
   /// Records columns and H offsets (after the structure is built).
   virtual void finalize(const std::vector<ParameterBlock>& blocks, const BlockStructure& s) = 0;
-  /// Cost-only evaluation of blocks [begin, end); false + *failed = k on the first failure.
-  virtual bool cost(int begin, int end, double* cost, int* failed) const = 0;
+  /// Cost-only evaluation of the blocks idx[0..count) (idx null: blocks 0..count-1); false +
+  /// *failed = k on the first failure.
+  virtual bool cost(const int* idx, int count, double* cost, int* failed) const = 0;
   /// Evaluates and accumulates the blocks listed in idx[0..count) into H, g. Thread-safe for
   /// disjoint lists whose H/g entries do not overlap (scratch is on the caller's stack).
   virtual bool linearize(const int* idx, int count, double* H, double* g, double* cost, int* failed,
@@ -295,10 +296,11 @@ class ResidualContainer final : public ResidualContainerBase {
     }
   }
 
-  bool cost(int begin, int end, double* cost, int* failed) const override {
+  bool cost(const int* idx, int count, double* cost, int* failed) const override {
     double c = 0.0;
     Residual r;
-    for (int k = begin; k < end; ++k) {
+    for (int i = 0; i < count; ++i) {
+      const int k = idx ? idx[i] : i;
       double ck;
       if (!blocks[k].evaluate(sqrt_infos.data(), &ck, &r, nullptr)) {
         *failed = k;
@@ -664,51 +666,26 @@ class Problem {
   /// Cost ½Σρ(|W·r|²) at the current states. @return false (and *error) if a block fails.
   bool evaluate_cost(double* cost, EvaluationError* error = nullptr) const {
     *cost = 0.0;
-    if (num_threads_ == 2 && worker_) {
-      struct Ctx {
-        const Problem* p;
-        double cost = 0.0;
-        int container = -1, failed = -1;
-      } ctx{this};
-      worker_->run(
-          [](void* v) {
-            Ctx& c = *static_cast<Ctx*>(v);
-            for (std::size_t i = 0; i < c.p->containers_.size(); ++i) {
-              const auto& cont = *c.p->containers_[i];
-              const int n = cont.size();
-              if (!cont.cost(n / 2, n, &c.cost, &c.failed)) {
-                c.container = static_cast<int>(i);
-                return;
-              }
-            }
-          },
-          &ctx);
-      bool ok = true;
+    if (!finalized_) {  // no work lists yet: every block on the calling thread
       for (const auto& c : containers_) {
         int failed = -1;
-        if (!c->cost(0, c->size() / 2, cost, &failed)) {
-          set_error(*c, failed, "returned false or a non-finite residual", error);
-          ok = false;
-          break;
+        if (!c->cost(nullptr, c->size(), cost, &failed)) {
+          set_error(*c, failed, kFailed, error);
+          return false;
         }
       }
-      worker_->wait();
-      if (ok && ctx.container >= 0) {
-        set_error(*containers_[ctx.container], ctx.failed,
-                  "returned false or a non-finite residual", error);
-        ok = false;
-      }
-      *cost += ctx.cost;
-      return ok;
+      return true;
     }
-    for (const auto& c : containers_) {
-      int failed = -1;
-      if (!c->cost(0, c->size(), cost, &failed)) {
-        set_error(*c, failed, "returned false or a non-finite residual", error);
-        return false;
-      }
-    }
-    return true;
+    // The same work lists (and summation order) as linearize(): equal costs at equal states.
+    double cost1 = 0.0;
+    PartFailure fail;
+    const bool ok = for_parts(
+        [](const detail::ResidualContainerBase& c, const std::vector<int>& l, double* acc,
+           int* failed) { return c.cost(l.data(), static_cast<int>(l.size()), acc, failed); },
+        cost, &cost1, &fail);
+    if (!ok) set_error(*containers_[fail.container], fail.block, kFailed, error);
+    *cost += cost1;
+    return ok;
   }
 
   /// Evaluates residuals and Jacobians at the current states and writes H = J̃ᵀJ̃ (values on
@@ -744,61 +721,23 @@ class Problem {
     }
     std::fill(g, g + structure_->num_cols(), 0.0);
     times->assemble += std::chrono::duration<double>(std::chrono::steady_clock::now() - tz).count();
-    *cost = 0.0;
-    struct Ctx {
-      const Problem* p;
+    struct Acc {
       double* H;
       double* g;
       double cost = 0.0;
-      int container = -1, failed = -1;
       LinearizeTimes times;
-    } ctx{this, H->values(), g, 0.0, -1, -1, LinearizeTimes{}};
-    const bool two = num_threads_ == 2 && worker_;
-    if (two) {
-      worker_->run(
-          [](void* v) {
-            Ctx& c = *static_cast<Ctx*>(v);
-            for (std::size_t i = 0; i < c.p->containers_.size(); ++i) {
-              const auto& cont = *c.p->containers_[i];
-              const auto& l = cont.part[1];
-              if (!cont.linearize(l.data(), static_cast<int>(l.size()), c.H, c.g, &c.cost,
-                                  &c.failed, &c.times)) {
-                c.container = static_cast<int>(i);
-                return;
-              }
-            }
-          },
-          &ctx);
-    }
-    bool ok = true;
-    for (const auto& c : containers_) {
-      const auto& l = c->part[0];
-      int failed = -1;
-      if (!c->linearize(l.data(), static_cast<int>(l.size()), H->values(), g, cost, &failed,
-                        times)) {
-        set_error(*c, failed, "returned false or a non-finite residual", error);
-        ok = false;
-        break;
-      }
-    }
-    if (two) worker_->wait();
-    if (ok && ctx.container >= 0) {
-      set_error(*containers_[ctx.container], ctx.failed, "returned false or a non-finite residual",
-                error);
-      ok = false;
-    }
-    // Blocks straddling the split, after both threads are done.
-    for (const auto& c : containers_) {
-      if (!ok) break;
-      const auto& l = c->part[2];
-      int failed = -1;
-      if (!c->linearize(l.data(), static_cast<int>(l.size()), H->values(), g, cost, &failed,
-                        times)) {
-        set_error(*c, failed, "returned false or a non-finite residual", error);
-        ok = false;
-      }
-    }
-    *cost += ctx.cost;
+    } acc0{H->values(), g, 0.0, LinearizeTimes{}}, acc1{H->values(), g, 0.0, LinearizeTimes{}};
+    PartFailure fail;
+    const bool ok = for_parts(
+        [](const detail::ResidualContainerBase& c, const std::vector<int>& l, Acc* a, int* failed) {
+          return c.linearize(l.data(), static_cast<int>(l.size()), a->H, a->g, &a->cost, failed,
+                             &a->times);
+        },
+        &acc0, &acc1, &fail);
+    if (!ok) set_error(*containers_[fail.container], fail.block, kFailed, error);
+    *cost = acc0.cost + acc1.cost;
+    times->evaluate += acc0.times.evaluate;  // the calling thread's
+    times->assemble += acc0.times.assemble;
     return ok;
   }
 
@@ -889,12 +828,13 @@ class Problem {
     if (two) accel_buffer_.assign(static_cast<std::size_t>(n), 0.0);
     save_state();
     plus(accel_step_.data());
+    PartFailure fail;
     const bool ok = for_parts(
-        [v, h, slot](detail::ResidualContainerBase& c, const std::vector<int>& l, double* out) {
-          int failed = -1;
-          return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, slot, out, &failed);
+        [v, h, slot](const detail::ResidualContainerBase& c, const std::vector<int>& l, double* out,
+                     int* failed) {
+          return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, slot, out, failed);
         },
-        rhs, two ? accel_buffer_.data() : nullptr);
+        rhs, two ? accel_buffer_.data() : nullptr, &fail);
     restore_state();
     if (!ok) return false;
     if (two)
@@ -1014,34 +954,55 @@ class Problem {
                                 s.block_size(b), s.column_height(b)});
   }
 
-  /// Runs f(container, work list, out) over every container's work lists: part 0 (and, with
-  /// 2 threads, part 1 on the worker with out1, then part 2) with out0. @return false if any
-  /// call returned false.
-  template <typename F>
-  bool for_parts(F f, double* out0, double* out1) {
-    const bool two = num_threads_ == 2 && worker_;
-    struct Ctx {
-      Problem* p;
+  /// The first failure for_parts() met: container index and block within it (-1: none).
+  struct PartFailure {
+    int container = -1, block = -1;
+  };
+  static constexpr const char* kFailed = "returned false or a non-finite residual";
+
+  /// The threading of linearize(), evaluate_cost() and acceleration_rhs() (see
+  /// set_num_threads): f(container, work list, ctx, &failed_block) over every container's
+  /// list 0 on the calling thread with ctx0 and, with 2 threads, list 1 on the worker with ctx1
+  /// meanwhile; then list 2 (blocks straddling the split) on the calling thread with ctx0.
+  /// Each thread stops at its first false; list 2 runs only if nothing failed. @return false
+  /// with *fail = the calling thread's failure, else the worker's.
+  template <typename F, typename Ctx>
+  bool for_parts(F f, Ctx* ctx0, Ctx* ctx1, PartFailure* fail) const {
+    struct Job {
+      const Problem* p;
       F* f;
-      double* out;
-      bool ok = true;
-    } ctx{this, &f, out1};
+      Ctx* ctx;
+      PartFailure fail;
+    };
+    const bool two = num_threads_ == 2 && worker_;
+    Job job{this, &f, ctx1, PartFailure{}};
     if (two) {
       worker_->run(
           [](void* vp) {
-            Ctx& c = *static_cast<Ctx*>(vp);
-            for (auto& cont : c.p->containers_)
-              if (c.ok) c.ok = (*c.f)(*cont, cont->part[1], c.out);
+            Job& j = *static_cast<Job*>(vp);
+            run_list(*j.p, *j.f, 1, j.ctx, &j.fail);
           },
-          &ctx);
+          &job);
     }
-    bool ok = true;
-    for (auto& c : containers_)
-      if (ok) ok = f(*c, c->part[0], out0);
+    bool ok = run_list(*this, f, 0, ctx0, fail);
     if (two) worker_->wait();
-    for (auto& c : containers_)
-      if (ok) ok = f(*c, c->part[2], out0);
-    return ok && ctx.ok;
+    if (ok && job.fail.container >= 0) {
+      *fail = job.fail;
+      ok = false;
+    }
+    return ok && run_list(*this, f, 2, ctx0, fail);
+  }
+  template <typename F, typename Ctx>
+  static bool run_list(const Problem& p, F& f, int list, Ctx* ctx, PartFailure* fail) {
+    for (std::size_t i = 0; i < p.containers_.size(); ++i) {
+      const detail::ResidualContainerBase& c = *p.containers_[i];
+      int failed = -1;
+      if (!f(c, c.part[list], ctx, &failed)) {
+        *fail = {static_cast<int>(i), failed};
+        return false;
+      }
+    }
+    return true;
   }
 
   static void set_error(const detail::ResidualContainerBase& c, int k, const char* what,

@@ -66,13 +66,6 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
                              const std::vector<Eigen::Vector2d>& uv, const map::Camera& camera,
                              const LocalizeOptions& options = {});
 
-/// LM refinement of T_cw (M -> camera) through the core solver: minimises
-/// sum rho(|pi(T_cw X_i) - u_i|^2) with Huber(huber_px) when huber_px > 0, else plain least
-/// squares. Returns the RMS of the raw (unweighted) residuals at the solution; NaN if a point
-/// is behind the camera at the start.
-double refine_pose(const std::vector<Eigen::Vector3d>& X, const std::vector<Eigen::Vector2d>& uv,
-                   const map::Camera& camera, double huber_px, int max_iterations, lie::SE3d* T_cw);
-
 /// The map-to-world correspondence of a view localized against a keyframe (DESIGN.md):
 /// T_vk = T_vm * T_km^-1 (fixed relative pose keyframe -> view, M units), y_w = the geo-tag's
 /// position in W, inlier count, RMS, and the geo-tag id.
