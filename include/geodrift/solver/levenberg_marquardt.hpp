@@ -124,9 +124,9 @@ struct Options {
   /// model; a step that raises the cost is still never accepted. Costs per iteration one
   /// residual-only evaluation at x ⊞ h·v, two small products per block and one more solve; the
   /// Jacobians of the current and the speculative point are kept during the solve (Problem::
-  /// reserve_acceleration: 2 × (98 + 7) doubles per Sim(3) edge, ~1.7× the memory of H on a
-  /// pose graph). Pays off where the cost valley is curved (large corrections along long
-  /// chains, e.g. the Sim(3) drift graph: BENCHMARKS.md).
+  /// reserve_acceleration: 2 × (49 + 8 + 7) doubles per Sim(3) edge, about the memory of H and
+  /// its speculative twin together on a pose graph). Pays off where the cost valley is curved
+  /// (large corrections along long chains, e.g. the Sim(3) drift graph: BENCHMARKS.md).
   bool geodesic_acceleration = false;
   double acceleration_step = 0.1;        ///< h of the finite difference (their choice 0.1)
   double max_acceleration_ratio = 0.75;  ///< α: largest accepted 2|a|/|v| (their 0.75)

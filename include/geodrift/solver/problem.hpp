@@ -255,6 +255,22 @@ class ResidualContainerBase {
                             double* rhs, int* failed) const = 0;
 };
 
+/// What the geodesic-acceleration store keeps of a block's J̃: the whole tuple, or for a
+/// functor with a LinkGroup (two parameters of the same DoF) one Jacobian J and the link G:
+/// both parameters free, J = J̃_0 and J̃_1 = −J̃_0·Ad(G) is rebuilt when read (64 instead of 105
+/// doubles per Sim(3) edge with W·r); one free, J is that parameter's J̃ (G unused).
+template <typename Block, bool = Block::kHasLink>
+struct StoredJacobian {
+  using type = typename Block::Jacobians;
+};
+template <typename Block>
+struct StoredJacobian<Block, true> {
+  struct type {
+    typename Block::FirstJacobian J;
+    typename Block::LinkGroup G;
+  };
+};
+
 template <typename Functor, typename... Params>
 class ResidualContainer final : public ResidualContainerBase {
  public:
@@ -337,10 +353,7 @@ class ResidualContainer final : public ResidualContainerBase {
           }
           c += ck;
           b.accumulate_linked(r, std::get<0>(J), link, H, g);
-          if (e_out) {  // J̃_1 = −J̃_0·Ad(G)
-            std::get<1>(J) = -link.times_adjoint(std::get<0>(J));
-            stored_J_[store_slot][idx[k]] = J;
-          }
+          if (e_out) stored_J_[store_slot][idx[k]] = {std::get<0>(J), link};
           continue;
         }
       }
@@ -349,7 +362,12 @@ class ResidualContainer final : public ResidualContainerBase {
         ok = false;
         break;
       }
-      if (e_out) stored_J_[store_slot][idx[k]] = J;
+      if (e_out) {
+        if constexpr (Block::kHasLink)  // at most one parameter free here: keep its J̃
+          stored_J_[store_slot][idx[k]].J = b.col_[0] >= 0 ? std::get<0>(J) : std::get<1>(J);
+        else
+          stored_J_[store_slot][idx[k]] = J;
+      }
       c += ck;
       b.accumulate(r, J, H, g);
     }
@@ -361,11 +379,27 @@ class ResidualContainer final : public ResidualContainerBase {
   bool acceleration(const int* idx, int count, const double* v, double h, int slot, double* rhs,
                     int* failed) const override {
     Residual e_h;
+    [[maybe_unused]] Jacobians J;
     for (int k = 0; k < count; ++k) {
       const std::size_t i = static_cast<std::size_t>(idx[k]);
-      if (!blocks[i].weighted_residual(sqrt_infos.data(), &e_h) ||
-          !blocks[i].accumulate_acceleration(stored_e_[slot][i], stored_J_[slot][i], e_h, v, h,
-                                             rhs)) {
+      const Block& b = blocks[i];
+      const Jacobians* Ji;
+      if constexpr (Block::kHasLink) {  // rebuild the tuple from J and G (see StoredJacobian)
+        const auto& st = stored_J_[slot][i];
+        if (b.linked()) {
+          std::get<0>(J) = st.J;
+          std::get<1>(J) = -st.G.times_adjoint(st.J);
+        } else if (b.col_[0] >= 0) {
+          std::get<0>(J) = st.J;
+        } else {
+          std::get<1>(J) = st.J;
+        }
+        Ji = &J;
+      } else {
+        Ji = &stored_J_[slot][i];
+      }
+      if (!b.weighted_residual(sqrt_infos.data(), &e_h) ||
+          !b.accumulate_acceleration(stored_e_[slot][i], *Ji, e_h, v, h, rhs)) {
         *failed = idx[k];
         return false;
       }
@@ -480,7 +514,8 @@ class ResidualContainer final : public ResidualContainerBase {
   /// Geodesic acceleration stores: W·r and J̃ per block for 2 linearisation points (the
   /// current one and the speculative trial).
   mutable std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_e_[2];
-  mutable std::vector<Jacobians, Eigen::aligned_allocator<Jacobians>> stored_J_[2];
+  using Stored = typename StoredJacobian<Block>::type;
+  mutable std::vector<Stored, Eigen::aligned_allocator<Stored>> stored_J_[2];
 
   template <std::size_t... I>
   static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
@@ -797,9 +832,9 @@ class Problem {
   }
 
   /// Allocates (true) or frees (false) the geodesic-acceleration stores: per residual block
-  /// W·r and J̃ for two linearisation points (2·(m·n_J + m) doubles
-  /// for m residual rows and n_J Jacobian columns per block: 2 × (98 + 7) for a Sim(3)
-  /// edge). Dropped by finalize().
+  /// W·r and J̃ for two linearisation points (2·(m·n_J + m) doubles for m residual rows and
+  /// n_J Jacobian columns per block; a functor with a LinkGroup keeps J̃_0 and the link
+  /// instead, see StoredJacobian: 2 × (49 + 8 + 7) for a Sim(3) edge). Dropped by finalize().
   void reserve_acceleration(bool on) {
     GEODRIFT_CHECK(finalized_, "Problem::reserve_acceleration() before finalize()");
     for (auto& c : containers_) {
