@@ -310,7 +310,7 @@ class BlockCholeskySolver final : public LinearSolver {
   /// Whether block Cholesky suits `s`: a supported block size and, with the ordering analyze()
   /// would choose, at most `max_blocks_per_column` blocks per column of L on average.
   static bool thin_factor(const BlockStructure& s, double max_blocks_per_column) {
-    return BlockCholeskySolver().analyze_if_thin(s, max_blocks_per_column);
+    return BlockCholeskySolver().symbolic_if_thin(s, max_blocks_per_column);
   }
 
   LinearSolverStatus analyze(const BlockStructure& s) override {
@@ -324,22 +324,7 @@ class BlockCholeskySolver final : public LinearSolver {
   /// `max_blocks_per_column` blocks per column on average; false otherwise, with nothing of the
   /// numeric factor allocated (a thick factor goes to CHOLMOD, see LinearSolverType::kAuto).
   bool analyze_if_thin(const BlockStructure& s, double max_blocks_per_column) {
-    message_.clear();
-    factor_.reset();
-    B_ = supported_block_size(s);
-    if (B_ == 0) {
-      message_ =
-          "block Cholesky: needs every free parameter block of size 6 or 7 and no Schur "
-          "elimination";
-      return false;
-    }
-    detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
-    if (static_cast<double>(sym_.row.size()) > max_blocks_per_column * s.num_blocks()) {
-      message_ = "block Cholesky: factor thicker than " + std::to_string(max_blocks_per_column) +
-                 " blocks per column";
-      sym_ = detail::BlockSymbolic();
-      return false;
-    }
+    if (!symbolic_if_thin(s, max_blocks_per_column)) return false;
     if (B_ == 6)
       factor_ = std::make_unique<detail::BlockFactor<6>>();
     else
@@ -390,6 +375,28 @@ class BlockCholeskySolver final : public LinearSolver {
   const std::vector<int>& permutation() const { return sym_.perm; }
 
  private:
+  /// The part of analyze_if_thin() that decides: B_, the ordering and the symbolic factor sym_
+  /// (cleared when the factor is thicker than max_blocks_per_column); no numeric storage.
+  bool symbolic_if_thin(const BlockStructure& s, double max_blocks_per_column) {
+    message_.clear();
+    factor_.reset();
+    B_ = supported_block_size(s);
+    if (B_ == 0) {
+      message_ =
+          "block Cholesky: needs every free parameter block of size 6 or 7 and no Schur "
+          "elimination";
+      return false;
+    }
+    detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
+    if (static_cast<double>(sym_.row.size()) > max_blocks_per_column * s.num_blocks()) {
+      message_ = "block Cholesky: factor thicker than " + std::to_string(max_blocks_per_column) +
+                 " blocks per column";
+      sym_ = detail::BlockSymbolic();
+      return false;
+    }
+    return true;
+  }
+
   static std::vector<int> choose_order(const BlockStructure& s, Ordering ordering) {
     const int nb = s.num_blocks();
     std::vector<int> natural(nb);
