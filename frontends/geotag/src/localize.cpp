@@ -6,7 +6,6 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
-#include "geodrift/correction/localization_covariance.hpp"
 #include "geodrift/correction/pose_refinement.hpp"
 #include "geodrift/error.hpp"
 
@@ -75,6 +74,7 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
   const double huber = o.ransac_threshold_px / 2.0;
   T = correction::refine_pose_lm(X_m, uv, cam, T, o.lm_iterations, huber).T_cw;
   std::vector<int> idx;
+  correction::PnpResult refined;  // the last plain-LS refinement, on the inliers idx
   for (int round = 0; round < 2; ++round) {
     idx.clear();
     for (std::size_t i = 0; i < X_m.size(); ++i) {
@@ -89,8 +89,7 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
       Xi.push_back(X_m[i]);
       ui.push_back(uv[i]);
     }
-    const correction::PnpResult refined =
-        correction::refine_pose_lm(Xi, ui, cam, T, o.lm_iterations);
+    refined = correction::refine_pose_lm(Xi, ui, cam, T, o.lm_iterations);
     T = refined.T_cw;
     r.rms_px = refined.rms_px;
   }
@@ -125,16 +124,8 @@ LocalizeResult localize_view(const std::vector<Eigen::Vector3d>& X_m,
     r.reason = "inliers cover too small a part of the image (degenerate geometry)";
     return r;
   }
-  {
-    std::vector<Eigen::Vector3d> Xi;
-    std::vector<Eigen::Vector2d> ui;
-    for (int i : idx) {
-      Xi.push_back(X_m[i]);
-      ui.push_back(uv[i]);
-    }
-    const correction::PnpCovariance cov = correction::pnp_pose_covariance(Xi, ui, cam, T);
-    if (cov.ok) r.pose_cov = cov.pose;
-  }
+  // The covariance at T on the inliers idx (refine_pose_lm computed it for that last solve).
+  if (refined.covariance.ok) r.pose_cov = refined.covariance.pose;
   r.ok = true;
   return r;
 }
