@@ -33,6 +33,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   using Jacobian = Eigen::Matrix<Scalar, kDoF, kDoF>;
   using Point = Eigen::Matrix<Scalar, 3, 1>;
   using Matrix = Eigen::Matrix<Scalar, 4, 4>;
+  using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
 
   /// Identity.
   Sim3() = default;
@@ -80,15 +81,17 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     using std::log;
     const Point omega = R_.log();
     const Scalar sigma = log(s_);
-    const detail::VCoeffs<Scalar> c =
-        detail::sim3_coeffs<Scalar>(omega.norm(), sigma, J_xi_S != nullptr);
-    const Eigen::Matrix<Scalar, 3, 3> Ci = v_matrix(omega, c).inverse();
+    const Scalar theta = omega.norm();
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(theta, sigma, J_xi_S != nullptr);
+    const Mat3 W = skew<Scalar>(omega);
+    const Mat3 W2 = W * W;
+    const Mat3 Ci = (c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2).inverse();
     // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
     Tangent xi;
     xi.template segment<3>(kOmega) = omega;
     xi[kSigma] = sigma;
     xi.template segment<3>(kNu) = Ci * t_;
-    if (J_xi_S) inverse_blocks(omega, xi.template segment<3>(kNu), c, Ci, J_xi_S);
+    if (J_xi_S) inverse_blocks(omega, theta, xi.template segment<3>(kNu), t_, W, W2, c, Ci, J_xi_S);
     return xi;
   }
 
@@ -240,18 +243,29 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     return c.c0 * Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
   }
 
-  // Jl⁻¹(ξ) for ξ = (ω, σ, ν) given the coefficients c (with derivatives) and C⁻¹ of that ξ.
-  static void inverse_blocks(const Point& omega, const Point& nu, const detail::VCoeffs<Scalar>& c,
-                             const Eigen::Matrix<Scalar, 3, 3>& Ci, Jacobian* Jli) {
-    const Eigen::Matrix<Scalar, 3, 3> J = detail::so3_left_jacobian<Scalar>(omega);
-    Eigen::Matrix<Scalar, 3, 3> A;
-    Point b;
-    detail::translation_rows<Scalar>(omega, nu, c, J, &A, &b);
-    const Eigen::Matrix<Scalar, 3, 3> Ji = detail::so3_left_jacobian_inverse<Scalar>(omega);
+  // Jl⁻¹(ξ) for ξ = (ω, σ, ν), from what log() has anyway: θ = |ω|, t = C·ν, W = [ω]x, W², the
+  // coefficients c (with derivatives) and C⁻¹. Block inversion of left_jacobian()'s
+  // lower-triangular form, where the translation row A = D + [t]x·J (D = ∂(Cν)/∂ω, see
+  // detail::translation_rows) enters only as A·J⁻¹ = D·J⁻¹ + [t]x: neither J nor A is formed.
+  // In D = (c1t·Wν + c2t·W²ν − 2c2·ν)ωᵀ − c1·[ν]x + c2·((ωᵀν)I + ωνᵀ) the rank-one part passes
+  // J⁻¹ unchanged (ωᵀW = 0, so ωᵀ·J⁻¹ = ωᵀ).
+  static void inverse_blocks(const Point& omega, Scalar theta, const Point& nu, const Point& t,
+                             const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c,
+                             const Mat3& Ci, Jacobian* Jli) {
+    const Mat3 Ji = Mat3::Identity() - Scalar(0.5) * W +
+                    detail::so3_left_jacobian_inverse_d2<Scalar>(theta) * W2;
+    const Point Wnu = W * nu;
+    const Point W2nu = W * Wnu;
+    Mat3 P = c.c2 * omega * nu.transpose() - c.c1 * skew<Scalar>(nu);
+    P.diagonal().array() += c.c2 * omega.dot(nu);
+    Mat3 AJi = skew<Scalar>(t);
+    AJi.noalias() += P * Ji;
+    AJi.noalias() += (c.c1t * Wnu + c.c2t * W2nu - Scalar(2) * c.c2 * nu) * omega.transpose();
+    const Point b = c.c0s * nu + c.c1s * Wnu + c.c2s * W2nu - t;
     Jli->setZero();
     Jli->template block<3, 3>(kOmega, kOmega) = Ji;
     (*Jli)(kSigma, kSigma) = Scalar(1);
-    Jli->template block<3, 3>(kNu, kOmega).noalias() = -Ci * (A * Ji);
+    Jli->template block<3, 3>(kNu, kOmega).noalias() = -Ci * AJi;
     Jli->template block<3, 1>(kNu, kSigma).noalias() = -Ci * b;
     Jli->template block<3, 3>(kNu, kNu) = Ci;
   }
@@ -260,12 +274,13 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   static void blocks(const Tangent& xi, Jacobian* Jl, Jacobian* Jli) {
     const Point omega = xi.template segment<3>(kOmega);
     const Point nu = xi.template segment<3>(kNu);
-    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), xi[kSigma], true);
-    const Eigen::Matrix<Scalar, 3, 3> J = detail::so3_left_jacobian<Scalar>(omega);
-    Eigen::Matrix<Scalar, 3, 3> A;
-    Point b;
-    const Eigen::Matrix<Scalar, 3, 3> C = detail::translation_rows<Scalar>(omega, nu, c, J, &A, &b);
+    const Scalar theta = omega.norm();
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(theta, xi[kSigma], true);
     if (Jl) {
+      const Mat3 J = detail::so3_left_jacobian<Scalar>(omega);
+      Mat3 A;
+      Point b;
+      const Mat3 C = detail::translation_rows<Scalar>(omega, nu, c, J, &A, &b);
       Jl->setZero();
       Jl->template block<3, 3>(kOmega, kOmega) = J;
       (*Jl)(kSigma, kSigma) = Scalar(1);
@@ -274,14 +289,10 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
       Jl->template block<3, 3>(kNu, kNu) = C;
     }
     if (Jli) {
-      const Eigen::Matrix<Scalar, 3, 3> Ji = detail::so3_left_jacobian_inverse<Scalar>(omega);
-      const Eigen::Matrix<Scalar, 3, 3> Ci = C.inverse();
-      Jli->setZero();
-      Jli->template block<3, 3>(kOmega, kOmega) = Ji;
-      (*Jli)(kSigma, kSigma) = Scalar(1);
-      Jli->template block<3, 3>(kNu, kOmega) = -Ci * A * Ji;
-      Jli->template block<3, 1>(kNu, kSigma) = -Ci * b;
-      Jli->template block<3, 3>(kNu, kNu) = Ci;
+      const Mat3 W = skew<Scalar>(omega);
+      const Mat3 W2 = W * W;
+      const Mat3 C = c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2;
+      inverse_blocks(omega, theta, nu, C * nu, W, W2, c, C.inverse(), Jli);
     }
   }
 

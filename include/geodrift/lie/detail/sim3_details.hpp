@@ -55,10 +55,18 @@ inline constexpr double kInvFactorial[kSim3MaxMoment + 2] = {1.0,
                                                              1.0 / 20922789888000.0,
                                                              1.0 / 355687428096000.0};
 
-/// 1/k for k = 0..kSim3MaxMoment (entry 0 unused).
-inline constexpr double kInvInteger[kSim3MaxMoment + 1] = {
-    0.0,     1.0,      1.0 / 2,  1.0 / 3,  1.0 / 4,  1.0 / 5,  1.0 / 6,  1.0 / 7, 1.0 / 8,
-    1.0 / 9, 1.0 / 10, 1.0 / 11, 1.0 / 12, 1.0 / 13, 1.0 / 14, 1.0 / 15, 1.0 / 16};
+/// 1/k for k = 0..kSim3MaxMoment + kSim3SigmaSeriesMaxTerms (entry 0 unused): the moments'
+/// power series and recurrences multiply by these instead of dividing (a division is a serial
+/// ≈ 13-cycle step in their dependency chains; 1/k is correctly rounded at compile time).
+struct InverseIntegers {
+  static constexpr int kSize = kSim3MaxMoment + kSim3SigmaSeriesMaxTerms + 1;
+  double value[kSize];
+  constexpr InverseIntegers() : value{} {
+    for (int k = 1; k < kSize; ++k) value[k] = 1.0 / k;
+  }
+  constexpr double operator[](int k) const { return value[k]; }
+};
+inline constexpr InverseIntegers kInvInteger{};
 
 /// Number of θ² series terms M used for a given θ < kSim3ThetaSeries. The truncation of every
 /// coefficient's series (c1, c2, their σ- and θ-derivatives; the worst are c2s and c1t, whose
@@ -92,10 +100,10 @@ void sigma_moments(Scalar sigma, int n, Scalar* g) {
   const Scalar es = exp(sigma);
   if (abs(sigma) <= kSim3SigmaSeries<Scalar>) {
     Scalar term = Scalar(1);  // σʲ/j!
-    Scalar sum = Scalar(1) / Scalar(n + 1);
+    Scalar sum = Scalar(kInvInteger[n + 1]);
     for (int j = 1; j < kSim3SigmaSeriesMaxTerms; ++j) {
-      term *= sigma / Scalar(j);
-      const Scalar add = term / Scalar(n + j + 1);
+      term *= sigma * Scalar(kInvInteger[j]);
+      const Scalar add = term * Scalar(kInvInteger[n + j + 1]);
       sum += add;
       if (abs(add) <= std::numeric_limits<Scalar>::epsilon() * Scalar(1e-2) * abs(sum)) break;
     }

@@ -123,21 +123,23 @@ Mat3<Scalar> so3_left_jacobian(const Vec3<Scalar>& omega) {
   return Mat3<Scalar>::Identity() + c.c1 * W + c.c2 * (W * W);
 }
 
+/// d2(θ) = (1 − (θ/2)·cot(θ/2))/θ², the W² coefficient of the SO3 inverse left Jacobian below.
+template <typename Scalar>
+Scalar so3_left_jacobian_inverse_d2(Scalar theta) {
+  using std::cos;
+  using std::sin;
+  const Scalar t2 = theta * theta;
+  if (theta < kSmallAngle<Scalar>)
+    return Scalar(1) / Scalar(12) + t2 / Scalar(720) + t2 * t2 / Scalar(30240);
+  const Scalar h = theta / Scalar(2);
+  return (Scalar(1) - h * cos(h) / sin(h)) / t2;
+}
+
 /// SO3 inverse left Jacobian Jl⁻¹(ω) = I − W/2 + d2·W², d2 = (1 − (θ/2)·cot(θ/2))/θ².
 /// cot(θ/2) replaces (1+cosθ)/sinθ so the formula stays finite and accurate up to θ = π.
 template <typename Scalar>
 Mat3<Scalar> so3_left_jacobian_inverse(const Vec3<Scalar>& omega) {
-  using std::cos;
-  using std::sin;
-  const Scalar theta = omega.norm();
-  const Scalar t2 = theta * theta;
-  Scalar d2;
-  if (theta < kSmallAngle<Scalar>) {
-    d2 = Scalar(1) / Scalar(12) + t2 / Scalar(720) + t2 * t2 / Scalar(30240);
-  } else {
-    const Scalar h = theta / Scalar(2);
-    d2 = (Scalar(1) - h * cos(h) / sin(h)) / t2;
-  }
+  const Scalar d2 = so3_left_jacobian_inverse_d2(omega.norm());
   const Mat3<Scalar> W = skew<Scalar>(omega);
   return Mat3<Scalar>::Identity() - Scalar(0.5) * W + d2 * (W * W);
 }
