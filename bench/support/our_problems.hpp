@@ -95,9 +95,9 @@ struct FactorFloor {
 
 /// One bare CHOLMOD supernodal numeric factorisation of the symmetric matrix A (upper CSC,
 /// stype +1), AMD ordering; the symbolic analysis is done once and not timed; median of `reps`.
-inline FactorFloor cholmod_floor(int n, const std::vector<int>& col_ptr,
-                                 const std::vector<int>& row_idx, const std::vector<double>& values,
-                                 int reps = 5) {
+template <typename Values>  // std::vector<double> or BlockSparseMatrix::ValueVector
+FactorFloor cholmod_floor(int n, const std::vector<int>& col_ptr, const std::vector<int>& row_idx,
+                          const Values& values, int reps = 5) {
   cholmod_common cc;
   cholmod_start(&cc);
   cc.print = 0;
@@ -149,7 +149,7 @@ inline FactorFloor cholmod_floor(solver::Problem* problem) {
   double cost = 0.0;
   solver::LinearizeTimes times;
   problem->linearize(&H, g.data(), &cost, &times);
-  std::vector<double>& v = H.value_vector();
+  auto& v = H.value_vector();
   for (const int d : s.diagonal_positions()) v[static_cast<std::size_t>(d)] *= 1.0 + 1e-4;
   return cholmod_floor(s.num_cols(), s.col_ptr(), s.row_idx(), v);
 }
@@ -167,7 +167,7 @@ inline FactorFloor block_cholesky_floor(solver::Problem* problem, int reps = 5) 
   double cost = 0.0;
   solver::LinearizeTimes times;
   problem->linearize(&H, g.data(), &cost, &times);
-  std::vector<double>& v = H.value_vector();
+  auto& v = H.value_vector();
   for (const int d : s.diagonal_positions()) v[static_cast<std::size_t>(d)] *= 1.0 + 1e-4;
   solver::BlockCholeskySolver bc;
   if (bc.analyze(s) != solver::LinearSolverStatus::kSuccess) return f;

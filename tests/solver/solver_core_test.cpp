@@ -4,6 +4,9 @@
 #include <Eigen/Dense>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <fstream>
 #include <limits>
 #include <random>
 #include <string>
@@ -13,6 +16,7 @@
 #include "geodrift/solver/block_structure.hpp"
 #include "geodrift/solver/cholmod_solver.hpp"
 #include "geodrift/solver/dense_solver.hpp"
+#include "geodrift/solver/large_array_allocator.hpp"
 #include "geodrift/solver/levenberg_marquardt.hpp"
 #include "geodrift/solver/loss.hpp"
 #include "geodrift/solver/manifold.hpp"
@@ -131,7 +135,9 @@ TEST_CASE("Block structure matches the documented worked example", "[solver]") {
   CHECK(s.block_offset(2, 2) == 21);
   CHECK(s.block_offset(1, 2) == -1);
   // Rows of column 5 (first column of block 2): 0 1 5 6.
-  const std::vector<int> rows5(s.row_idx().begin() + 19, s.row_idx().begin() + 23);
+  const std::vector<int> rows = s.row_idx();
+  CHECK(rows.size() == 27u);
+  const std::vector<int> rows5(rows.begin() + 19, rows.begin() + 23);
   CHECK(rows5 == std::vector<int>{0, 1, 5, 6});
   // H_01(1, 2) lives at values[15].
   solver::BlockSparseMatrix H(&s);
@@ -500,4 +506,50 @@ TEST_CASE("Options::check_jacobians catches a wrong analytic Jacobian", "[solver
   CHECK(s.termination == Termination::kJacobianCheckFailed);
   CHECK_THAT(s.message, Catch::Contains("residual block 1"));
   CHECK(bad == before);  // states restored after the numeric differences
+}
+
+namespace {
+/// VmFlags of the /proc/self/smaps mapping that contains p ("" if not found or not Linux).
+std::string vm_flags_of(const void* p) {
+  std::ifstream in("/proc/self/smaps");
+  const auto a = reinterpret_cast<std::uintptr_t>(p);
+  std::string line;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    unsigned long lo = 0, hi = 0;
+    if (std::sscanf(line.c_str(), "%lx-%lx ", &lo, &hi) == 2 && line.find(':') > 8)
+      inside = a >= lo && a < hi;
+    else if (inside && line.rfind("VmFlags:", 0) == 0)
+      return line;
+  }
+  return "";
+}
+}  // namespace
+
+TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, values kept",
+          "[solver]") {
+  using Mat7 = Eigen::Matrix<double, 7, 7>;
+  const std::size_t n_big = solver::kLargeArrayThreshold / sizeof(double) + 3;
+  std::vector<double, solver::LargeArrayAllocator<double>> a(n_big, 1.5), b(n_big, 2.5);
+  const auto pa = reinterpret_cast<std::uintptr_t>(a.data());
+  const auto pb = reinterpret_cast<std::uintptr_t>(b.data());
+  CHECK(pa % 64 == 0);
+  CHECK(pb % 64 == 0);
+  // Consecutive large arrays start at different offsets within their first huge page.
+  CHECK(pa % solver::kHugePageBytes != pb % solver::kHugePageBytes);
+  CHECK(pa % solver::kHugePageBytes < 16 * 33 * 64);
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  CHECK_THAT(vm_flags_of(a.data()), Catch::Contains(" hg"));  // MADV_HUGEPAGE applied
+  CHECK_THAT(vm_flags_of(a.data() + n_big - 1), Catch::Contains(" hg"));
+#endif
+  a.back() = 4.0;
+  a.resize(a.size() * 2, -1.0);  // reallocation copies the values and unmaps the old array
+  CHECK(a.front() == 1.5);
+  CHECK(a[n_big - 1] == 4.0);
+  CHECK(a.back() == -1.0);
+  CHECK(b[n_big / 2] == 2.5);
+  std::vector<Mat7, solver::LargeArrayAllocator<Mat7>> small(3, Mat7::Constant(2.0));
+  CHECK(reinterpret_cast<std::uintptr_t>(small.data()) % 64 == 0);
+  CHECK(small[2](6, 6) == 2.0);
+  CHECK_THAT(vm_flags_of(small.data()), !Catch::Contains(" hg"));  // ordinary heap
 }

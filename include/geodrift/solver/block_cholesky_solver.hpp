@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "geodrift/solver/large_array_allocator.hpp"
 #include "geodrift/solver/linear_solver.hpp"
 
 namespace geodrift::solver {
@@ -279,7 +280,7 @@ class BlockFactor final : public BlockFactorBase {
 
  private:
   const BlockSymbolic* sym_ = nullptr;
-  std::vector<Mat, Eigen::aligned_allocator<Mat>> L_, Linv_;
+  std::vector<Mat, LargeArrayAllocator<Mat>> L_, Linv_;
   std::vector<Vec, Eigen::aligned_allocator<Vec>> y_;
   std::vector<int> slot_of_row_, head_, next_, ptr_;
 };

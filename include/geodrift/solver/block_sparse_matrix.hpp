@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "geodrift/solver/block_structure.hpp"
+#include "geodrift/solver/large_array_allocator.hpp"
 
 namespace geodrift::solver {
 
@@ -18,6 +19,8 @@ class BlockSparseMatrix {
  public:
   using BlockMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
   using ConstBlockMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+  /// The value array (huge pages when large, see large_array_allocator.hpp).
+  using ValueVector = std::vector<double, LargeArrayAllocator<double>>;
 
   BlockSparseMatrix() = default;
   explicit BlockSparseMatrix(const BlockStructure* s) { reset(s); }
@@ -32,7 +35,7 @@ class BlockSparseMatrix {
   int rows() const { return structure_->num_cols(); }
   double* values() { return values_.data(); }
   const double* values() const { return values_.data(); }
-  std::vector<double>& value_vector() { return values_; }
+  ValueVector& value_vector() { return values_; }
 
   void set_zero() { std::fill(values_.begin(), values_.end(), 0.0); }
 
@@ -76,7 +79,7 @@ class BlockSparseMatrix {
 
  private:
   const BlockStructure* structure_ = nullptr;
-  std::vector<double> values_;
+  ValueVector values_;
 };
 
 }  // namespace geodrift::solver

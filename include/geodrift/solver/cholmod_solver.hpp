@@ -49,6 +49,7 @@ class CholmodSolver final : public LinearSolver {
     message_.clear();
     free_factor();
     n_ = s.num_cols();
+    row_idx_ = s.row_idx();
     cholmod_sparse A = view(s, nullptr);
     A.xtype = CHOLMOD_PATTERN;
     if (ordering_ == Ordering::kBlockAmd) {
@@ -122,12 +123,13 @@ class CholmodSolver final : public LinearSolver {
   bool is_supernodal() const { return L_ && L_->is_super; }
 
  private:
-  static cholmod_sparse view(const BlockStructure& s, const double* values) {
+  // The analysed pattern's scalar CSC (row indices from analyze()) with `values`.
+  cholmod_sparse view(const BlockStructure& s, const double* values) {
     cholmod_sparse A{};
     A.nrow = A.ncol = static_cast<size_t>(s.num_cols());
     A.nzmax = static_cast<size_t>(s.num_values());
     A.p = const_cast<int*>(s.col_ptr().data());
-    A.i = const_cast<int*>(s.row_idx().data());
+    A.i = row_idx_.data();
     A.x = const_cast<double*>(values);
     A.stype = 1;  // upper triangle used; lower entries of diagonal blocks ignored
     A.itype = CHOLMOD_INT;
@@ -157,6 +159,7 @@ class CholmodSolver final : public LinearSolver {
   cholmod_dense* Y_ = nullptr;
   cholmod_dense* E_ = nullptr;
   std::vector<int> perm_;
+  std::vector<int> row_idx_;  ///< scalar row indices of the analysed pattern
   int n_ = 0;
 };
 

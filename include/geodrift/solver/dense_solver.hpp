@@ -35,9 +35,10 @@ class DenseSolver final : public LinearSolver {
     const double* v = H.values();
     // Upper triangle from the CSC arrays (the lower part of diagonal blocks is ignored, as
     // CHOLMOD does), mirrored.
+    const std::vector<int> rows = s.row_idx();
     for (int c = 0; c < n_; ++c) {
       for (int p = s.col_ptr()[c]; p < s.col_ptr()[c + 1]; ++p) {
-        const int r = s.row_idx()[p];
+        const int r = rows[static_cast<std::size_t>(p)];
         if (r <= c) A_(r, c) = A_(c, r) = v[p];
       }
     }

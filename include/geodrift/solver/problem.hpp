@@ -52,6 +52,7 @@
 #include "geodrift/error.hpp"
 #include "geodrift/solver/block_sparse_matrix.hpp"
 #include "geodrift/solver/block_structure.hpp"
+#include "geodrift/solver/large_array_allocator.hpp"
 #include "geodrift/solver/loss.hpp"
 #include "geodrift/solver/manifold.hpp"
 #include "geodrift/solver/parameter_block.hpp"
@@ -513,9 +514,9 @@ class ResidualContainer final : public ResidualContainerBase {
  private:
   /// Geodesic acceleration stores: W·r and J̃ per block for 2 linearisation points (the
   /// current one and the speculative trial).
-  mutable std::vector<Residual, Eigen::aligned_allocator<Residual>> stored_e_[2];
+  mutable std::vector<Residual, LargeArrayAllocator<Residual>> stored_e_[2];
   using Stored = typename StoredJacobian<Block>::type;
-  mutable std::vector<Stored, Eigen::aligned_allocator<Stored>> stored_J_[2];
+  mutable std::vector<Stored, LargeArrayAllocator<Stored>> stored_J_[2];
 
   template <std::size_t... I>
   static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
