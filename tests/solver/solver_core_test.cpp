@@ -529,6 +529,8 @@ std::string vm_flags_of(const void* p) {
 TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, values kept",
           "[solver]") {
   using Mat7 = Eigen::Matrix<double, 7, 7>;
+  solver::release_large_array_cache();
+  CHECK(solver::large_array_cache_bytes() == 0);
   const std::size_t n_big = solver::kLargeArrayThreshold / sizeof(double) + 3;
   std::vector<double, solver::LargeArrayAllocator<double>> a(n_big, 1.5), b(n_big, 2.5);
   const auto pa = reinterpret_cast<std::uintptr_t>(a.data());
@@ -543,7 +545,8 @@ TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, v
   CHECK_THAT(vm_flags_of(a.data() + n_big - 1), Catch::Contains(" hg"));
 #endif
   a.back() = 4.0;
-  a.resize(a.size() * 2, -1.0);  // reallocation copies the values and unmaps the old array
+  const double* old_a = a.data();
+  a.resize(a.size() * 2, -1.0);  // reallocation copies the values, keeps the old mapping
   CHECK(a.front() == 1.5);
   CHECK(a[n_big - 1] == 4.0);
   CHECK(a.back() == -1.0);
@@ -552,4 +555,16 @@ TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, v
   CHECK(reinterpret_cast<std::uintptr_t>(small.data()) % 64 == 0);
   CHECK(small[2](6, 6) == 2.0);
   CHECK_THAT(vm_flags_of(small.data()), !Catch::Contains(" hg"));  // ordinary heap
+
+  // A freed mapping is kept and handed to the next array that fits; released on request.
+  const double* old_b = b.data();
+  decltype(b)().swap(b);
+  CHECK(solver::large_array_cache_bytes() >= n_big * sizeof(double));
+  std::vector<double, solver::LargeArrayAllocator<double>> c(n_big + 100, 7.0);
+  CHECK((c.data() == old_a || c.data() == old_b));  // both kept mappings fit
+  CHECK(c[n_big + 99] == 7.0);
+  decltype(c)().swap(c);
+  decltype(a)().swap(a);
+  solver::release_large_array_cache();
+  CHECK(solver::large_array_cache_bytes() == 0);
 }
