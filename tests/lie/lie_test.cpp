@@ -433,9 +433,8 @@ TEST_CASE("Sim3 reduced theta series agree with the full series and the closed f
 }
 
 TEMPLATE_TEST_CASE(
-    "times_adjoint and adjoint_transpose_times equal the products with the adjoint; Sim3 log "
-    "shares its "
-    "coefficients with left_jacobian_inverse",
+    "times_adjoint, adjoint_times and adjoint_transpose_times equal the products with the "
+    "adjoint; log shares its coefficients with left_jacobian_inverse",
     "[lie]", SE3d, Sim3d) {
   using G = TestType;
   std::mt19937 rng(91);
@@ -456,6 +455,8 @@ TEMPLATE_TEST_CASE(
     const typename G::Tangent u = M.col(0);
     const typename G::Tangent uref = X.adjoint().transpose() * u;
     CHECK((X.adjoint_transpose_times(u) - uref).norm() <= 1e-13 * (1.0 + uref.norm()));
+    const typename G::Tangent dref = X.adjoint() * u;
+    CHECK((X.adjoint_times(u) - dref).norm() <= 1e-13 * (1.0 + dref.norm()));
     for (const G& Y : {X, G::exp(xi_small)}) {
       typename G::Jacobian J;
       const typename G::Tangent l = Y.log(&J);

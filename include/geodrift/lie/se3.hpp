@@ -120,6 +120,17 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
     return out;
   }
 
+  /// Ad(T)·d for any d without forming Ad(T) (a tangent moved across T):
+  ///   Ad(T)·d = [ R·d_ω ;  t × (R·d_ω) + R·d_ν ]   (equals adjoint() * d to rounding).
+  Tangent adjoint_times(const Tangent& d) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    const Point w = R * d.template segment<3>(kOmega);
+    Tangent out;
+    out.template segment<3>(kOmega) = w;
+    out.template segment<3>(kNu) = t_.cross(w) + R * d.template segment<3>(kNu);
+    return out;
+  }
+
   /// Ad(T)ᵀ·u for any u without forming Ad(T) (a gradient through a composition):
   ///   Ad(T)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  Rᵀ·u_ν ]   (equals adjoint().transpose() * u to
   ///   rounding).

@@ -164,6 +164,20 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     return out;
   }
 
+  /// Ad(S)·d for any d without forming Ad(S) (a tangent moved across S):
+  ///   Ad(S)·d = [ R·d_ω ;  d_σ ;  t × (R·d_ω) − d_σ·t + s·R·d_ν ]   (equals adjoint() * d to
+  ///   rounding).
+  Tangent adjoint_times(const Tangent& d) const {
+    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    const Point w = R * d.template segment<3>(kOmega);
+    Tangent out;
+    out.template segment<3>(kOmega) = w;
+    out[kSigma] = d[kSigma];
+    out.template segment<3>(kNu) =
+        t_.cross(w) - d[kSigma] * t_ + s_ * (R * d.template segment<3>(kNu));
+    return out;
+  }
+
   /// Ad(S)ᵀ·u for any u without forming Ad(S) (a gradient through a composition):
   ///   Ad(S)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  u_σ − t·u_ν ;  s·Rᵀ·u_ν ]
   /// (equals adjoint().transpose() * u to rounding).

@@ -258,8 +258,9 @@ class ResidualContainerBase {
 
 /// What the geodesic-acceleration store keeps of a block's J̃: the whole tuple, or for a
 /// functor with a LinkGroup (two parameters of the same DoF) one Jacobian J and the link G:
-/// both parameters free, J = J̃_0 and J̃_1 = −J̃_0·Ad(G) is rebuilt when read (64 instead of 105
-/// doubles per Sim(3) edge with W·r); one free, J is that parameter's J̃ (G unused).
+/// both parameters free, J = J̃_0 and J̃_1 = −J̃_0·Ad(G) is only applied through G
+/// (ResidualBlock::accumulate_acceleration_linked; 64 instead of 105 doubles per Sim(3) edge
+/// with W·r); one free, J is that parameter's J̃ (G unused).
 template <typename Block, bool = Block::kHasLink>
 struct StoredJacobian {
   using type = typename Block::Jacobians;
@@ -385,12 +386,17 @@ class ResidualContainer final : public ResidualContainerBase {
       const std::size_t i = static_cast<std::size_t>(idx[k]);
       const Block& b = blocks[i];
       const Jacobians* Ji;
-      if constexpr (Block::kHasLink) {  // rebuild the tuple from J and G (see StoredJacobian)
+      if constexpr (Block::kHasLink) {  // rebuild the tuple from J (see StoredJacobian)
         const auto& st = stored_J_[slot][i];
-        if (b.linked()) {
-          std::get<0>(J) = st.J;
-          std::get<1>(J) = -st.G.times_adjoint(st.J);
-        } else if (b.col_[0] >= 0) {
+        if (b.linked()) {  // both free: J̃_1 = −J̃_0·Ad(G) stays implicit
+          if (!b.weighted_residual(sqrt_infos.data(), &e_h) ||
+              !b.accumulate_acceleration_linked(stored_e_[slot][i], st.J, st.G, e_h, v, h, rhs)) {
+            *failed = idx[k];
+            return false;
+          }
+          continue;
+        }
+        if (b.col_[0] >= 0) {
           std::get<0>(J) = st.J;
         } else {
           std::get<1>(J) = st.J;

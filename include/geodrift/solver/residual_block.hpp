@@ -24,10 +24,12 @@
 /// A two-parameter functor whose second Jacobian is −(first)·Ad(G) for a group element G it
 /// computes anyway (RelativePoseResidual: J_r_Sj = −J_r_Si·Ad(S_i·S_j⁻¹)) may declare
 /// @code
-///   using LinkGroup = lie::Sim3d;   // a group with adjoint_transpose_times(), times_adjoint()
+///   using LinkGroup = lie::Sim3d;   // see below for what the group must provide
 ///   bool linked(const lie::Sim3d& S_i, const lie::Sim3d& S_j, Eigen::Matrix<double, 7, 1>* r,
 ///               Eigen::Matrix<double, 7, 7>* J_r_Si, lie::Sim3d* G) const;  // G: J_r_Sj link
 /// @endcode
+/// The group provides times_adjoint(M) = M·Ad, adjoint_times(d) = Ad·d and
+/// adjoint_transpose_times(u) = Adᵀ·u (SE3d and Sim3d do).
 /// When both parameters are free, ResidualBlock then evaluates only J̃_i (weight and Triggs
 /// correction act from the left, so J̃_j = −J̃_i·Ad(G) still holds) and accumulates
 ///   H_ii += J̃_iᵀJ̃_i,  H_ij −= H_ii'·Ad(G),  H_jj += Ad(G)ᵀ·H_ii'·Ad(G),  g_i += u,
@@ -257,13 +259,7 @@ class ResidualBlock {
   /// @return false if a value is not finite (the caller skips the acceleration then).
   bool accumulate_acceleration(const Residual& e, const Jacobians& J, const Residual& e_h,
                                const double* v, double h, double* rhs) const {
-    Residual de = (e_h - e) / h;
-    if (!loss_.is_trivial()) {
-      const double s = e.squaredNorm();
-      double rho[3];
-      loss_.evaluate(s, rho);
-      TriggsCorrector(s, rho).correct_jacobian(e, de);
-    }
+    Residual de = corrected_difference(e, e_h, h);
     detail::static_for<sizeof...(Params)>([&](auto k) {
       constexpr std::size_t K = decltype(k)::value;
       if (col_[K] >= 0)
@@ -278,6 +274,26 @@ class ResidualBlock {
       Eigen::Map<Eigen::Matrix<double, kDoF<K>, 1>>(rhs + col_[K]).noalias() +=
           std::get<K>(J).transpose() * dd;
     });
+    return true;
+  }
+
+  /// accumulate_acceleration() on the linked path, from the stored J̃_0 and link G: with
+  /// J̃_1 = −J̃_0·Ad(G), J̃·v = J̃_0·(v_0 − Ad(G)·v_1) and J̃_1ᵀ·d = −Ad(G)ᵀ·(J̃_0ᵀ·d), so
+  /// J̃_1 is never formed (two adjoint-vector products instead of a 7×7 one and a second J̃ᵀ·d).
+  template <typename G>
+  bool accumulate_acceleration_linked(const Residual& e, const FirstJacobian& J0, const G& link,
+                                      const Residual& e_h, const double* v, double h,
+                                      double* rhs) const {
+    static_assert(kHasLink && std::is_same_v<G, LinkGroup>, "the functor declares no LinkGroup");
+    using Vec = Eigen::Matrix<double, kDoF<0>, 1>;
+    const Eigen::Map<const Vec> v0(v + col_[0]), v1(v + col_[1]);
+    Residual de = corrected_difference(e, e_h, h);
+    de.noalias() -= J0 * (v0 - link.adjoint_times(v1));
+    const Residual dd = (2.0 / h) * de;
+    if (!dd.allFinite()) return false;
+    const Vec u = J0.transpose() * dd;
+    Eigen::Map<Vec>(rhs + col_[0]) += u;
+    Eigen::Map<Vec>(rhs + col_[1]) -= link.adjoint_transpose_times(u);
     return true;
   }
 
@@ -312,6 +328,19 @@ class ResidualBlock {
   bool call(Residual& r, Jacobians* jac, std::index_sequence<I...>) const {
     return functor_(Manifold<Params>::view(std::get<I>(states_))..., &r,
                     (jac && col_[I] >= 0 ? &std::get<I>(*jac) : nullptr)...);
+  }
+
+  /// C·(e_h − e)/h of accumulate_acceleration(): the weighted residual's difference quotient
+  /// through the Triggs corrector C at e (C = I without a loss).
+  Residual corrected_difference(const Residual& e, const Residual& e_h, double h) const {
+    Residual de = (e_h - e) / h;
+    if (!loss_.is_trivial()) {
+      const double s = e.squaredNorm();
+      double rho[3];
+      loss_.evaluate(s, rho);
+      TriggsCorrector(s, rho).correct_jacobian(e, de);
+    }
+    return de;
   }
 
   /// Shared tail of evaluate() / evaluate_linked(): r ← W·r (copied to *weighted if non-null),
