@@ -36,7 +36,6 @@
 #include <string>
 #include <vector>
 
-#include "geodrift/solver/large_array_allocator.hpp"
 #include "geodrift/solver/linear_solver.hpp"
 
 namespace geodrift::solver {
@@ -280,7 +279,9 @@ class BlockFactor final : public BlockFactorBase {
 
  private:
   const BlockSymbolic* sym_ = nullptr;
-  std::vector<Mat, LargeArrayAllocator<Mat>> L_, Linv_;
+  // Ordinary allocation: on the solver's own large-array mappings (huge pages or not) this
+  // factorisation ran 25-30 % slower in the 10k drift solve (BENCHMARKS.md, round 6).
+  std::vector<Mat, Eigen::aligned_allocator<Mat>> L_, Linv_;
   std::vector<Vec, Eigen::aligned_allocator<Vec>> y_;
   std::vector<int> slot_of_row_, head_, next_, ptr_;
 };

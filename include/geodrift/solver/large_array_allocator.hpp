@@ -2,7 +2,8 @@
 
 /// @file
 /// LargeArrayAllocator: the allocator of the solver's big per-problem arrays (the values of H
-/// and of its speculative twin, the block Cholesky factor, the geodesic-acceleration store).
+/// and of its speculative twin, the geodesic-acceleration store; not the block Cholesky factor,
+/// whose factorisation ran 25-30 % slower on these mappings, BENCHMARKS.md round 6).
 ///
 /// Why: a solve first-touches all of these. With 4 KiB pages that is one page fault per 4 KiB,
 /// and on a virtual machine a fault is expensive: 11 µs per 4 KiB page measured on the
