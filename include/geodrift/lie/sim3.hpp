@@ -85,7 +85,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(theta, sigma, J_xi_S != nullptr);
     const Mat3 W = skew<Scalar>(omega);
     const Mat3 W2 = W * W;
-    const Mat3 Ci = (c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2).inverse();
+    const Mat3 Ci = v_matrix(W, W2, c).inverse();
     // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
     Tangent xi;
     xi.template segment<3>(kOmega) = omega;
@@ -251,10 +251,13 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   struct Raw {};  // internal: inputs known valid
   Sim3(const SO3<Scalar>& R, const Point& t, Scalar s, Raw) : R_(R), t_(t), s_(s) {}
 
-  static Eigen::Matrix<Scalar, 3, 3> v_matrix(const Point& omega,
-                                              const detail::VCoeffs<Scalar>& c) {
-    const Eigen::Matrix<Scalar, 3, 3> W = skew<Scalar>(omega);
-    return c.c0 * Eigen::Matrix<Scalar, 3, 3>::Identity() + c.c1 * W + c.c2 * (W * W);
+  // C = c0·I + c1·W + c2·W² from W = [ω]x and W².
+  static Mat3 v_matrix(const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c) {
+    return c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2;
+  }
+  static Mat3 v_matrix(const Point& omega, const detail::VCoeffs<Scalar>& c) {
+    const Mat3 W = skew<Scalar>(omega);
+    return v_matrix(W, W * W, c);
   }
 
   // Jl⁻¹(ξ) for ξ = (ω, σ, ν), from what log() has anyway: θ = |ω|, t = C·ν, W = [ω]x, W², the
@@ -305,7 +308,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     if (Jli) {
       const Mat3 W = skew<Scalar>(omega);
       const Mat3 W2 = W * W;
-      const Mat3 C = c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2;
+      const Mat3 C = v_matrix(W, W2, c);
       inverse_blocks(omega, theta, nu, C * nu, W, W2, c, C.inverse(), Jli);
     }
   }

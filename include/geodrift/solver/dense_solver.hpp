@@ -21,6 +21,7 @@ class DenseSolver final : public LinearSolver {
     // No pre-sized LLT: Eigen's LLT(Index) leaves its `info` member uninitialised, and moving
     // such an object reads it (UBSan: invalid enum load). compute() sizes it on first use.
     x_.resize(n_);
+    row_idx_ = s.row_idx();
     message_.clear();
     return LinearSolverStatus::kSuccess;
   }
@@ -35,10 +36,9 @@ class DenseSolver final : public LinearSolver {
     const double* v = H.values();
     // Upper triangle from the CSC arrays (the lower part of diagonal blocks is ignored, as
     // CHOLMOD does), mirrored.
-    const std::vector<int> rows = s.row_idx();
     for (int c = 0; c < n_; ++c) {
       for (int p = s.col_ptr()[c]; p < s.col_ptr()[c + 1]; ++p) {
-        const int r = rows[static_cast<std::size_t>(p)];
+        const int r = row_idx_[static_cast<std::size_t>(p)];
         if (r <= c) A_(r, c) = A_(c, r) = v[p];
       }
     }
@@ -61,6 +61,7 @@ class DenseSolver final : public LinearSolver {
   double factor_nnz() const override { return 0.5 * double(n_) * double(n_ + 1); }
 
  private:
+  std::vector<int> row_idx_;  ///< scalar row indices of the analysed pattern
   int n_ = 0;
   Eigen::MatrixXd A_;
   Eigen::LLT<Eigen::MatrixXd> llt_;

@@ -385,28 +385,23 @@ class ResidualContainer final : public ResidualContainerBase {
     for (int k = 0; k < count; ++k) {
       const std::size_t i = static_cast<std::size_t>(idx[k]);
       const Block& b = blocks[i];
-      const Jacobians* Ji;
-      if constexpr (Block::kHasLink) {  // rebuild the tuple from J (see StoredJacobian)
+      bool ok = b.weighted_residual(sqrt_infos.data(), &e_h);
+      const Residual& e = stored_e_[slot][i];
+      if constexpr (Block::kHasLink) {  // J and G (see StoredJacobian)
         const auto& st = stored_J_[slot][i];
-        if (b.linked()) {  // both free: J̃_1 = −J̃_0·Ad(G) stays implicit
-          if (!b.weighted_residual(sqrt_infos.data(), &e_h) ||
-              !b.accumulate_acceleration_linked(stored_e_[slot][i], st.J, st.G, e_h, v, h, rhs)) {
-            *failed = idx[k];
-            return false;
-          }
-          continue;
+        if (ok && b.linked()) {  // both free: J̃_1 = −J̃_0·Ad(G) stays implicit
+          ok = b.accumulate_acceleration_linked(e, st.J, st.G, e_h, v, h, rhs);
+        } else if (ok) {  // one free: its J̃ into the tuple
+          if (b.col_[0] >= 0)
+            std::get<0>(J) = st.J;
+          else
+            std::get<1>(J) = st.J;
+          ok = b.accumulate_acceleration(e, J, e_h, v, h, rhs);
         }
-        if (b.col_[0] >= 0) {
-          std::get<0>(J) = st.J;
-        } else {
-          std::get<1>(J) = st.J;
-        }
-        Ji = &J;
       } else {
-        Ji = &stored_J_[slot][i];
+        ok = ok && b.accumulate_acceleration(e, stored_J_[slot][i], e_h, v, h, rhs);
       }
-      if (!b.weighted_residual(sqrt_infos.data(), &e_h) ||
-          !b.accumulate_acceleration(stored_e_[slot][i], *Ji, e_h, v, h, rhs)) {
+      if (!ok) {
         *failed = idx[k];
         return false;
       }
