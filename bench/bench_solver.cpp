@@ -301,6 +301,25 @@ void BM_Floor_Sim3Drift(benchmark::State& state) {
   }
 }
 
+/// One linearisation (residuals, Jacobians, H and g) of the drift graph at its start values:
+/// the per-edge cost of our evaluation, without the solver around it (counter time_per_edge).
+void BM_Linearize_Sim3Drift(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  gb::OurDriftGraph p(drift(n));
+  p.problem.finalize(false);
+  solver::BlockSparseMatrix H(&p.problem.structure());
+  std::vector<double> g(static_cast<std::size_t>(p.problem.structure().num_cols()));
+  for (auto _ : state) {
+    double cost = 0.0;
+    solver::LinearizeTimes times;
+    if (!p.problem.linearize(&H, g.data(), &cost, &times)) state.SkipWithError("linearize failed");
+    benchmark::DoNotOptimize(cost);
+  }
+  state.counters["time_per_edge"] = benchmark::Counter(
+      static_cast<double>(drift(n).edges.size()),
+      benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
 // ---- geodesic acceleration and the initial damping (Options::geodesic_acceleration) --------
 /// λ0 = 1e-8 on both sides (Ceres: initial trust-region radius 1e8): the drift graph's first
 /// iterations are limited by λ0 = 1e-4 (its soft directions, fixed by 1 m priors against 1e5
@@ -508,6 +527,7 @@ BENCHMARK(BM_Sim3Drift_OursAccelLowDampingCholmod)
     ->UseManualTime()
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Linearize_Sim3Drift)->Arg(10000)->ArgName("keyframes")->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Floor_Sim3Drift)
     ->Arg(1000)
     ->Arg(10000)
