@@ -154,8 +154,8 @@ class BlockStructure {
   /// Scalar CSC column pointers (size num_cols()+1), as CHOLMOD reads them.
   const std::vector<int>& col_ptr() const { return col_ptr_; }
   /// Scalar CSC row indices (size num_values()), built on each call, O(num_values()): only the
-  /// scalar solvers need them (CholmodSolver keeps its copy from analyze()), so the block
-  /// solvers' problems do not carry one int per stored value (14 MB at 10k Sim(3) keyframes).
+  /// scalar solvers need them (CholmodSolver and DenseSolver keep a copy from analyze()), so the
+  /// block solvers' problems do not carry one int per stored value (14 MB at 10k Sim(3) keyframes).
   std::vector<int> row_idx() const {
     std::vector<int> rows(static_cast<std::size_t>(num_values()));
     int p = 0;
