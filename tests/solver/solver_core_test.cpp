@@ -526,9 +526,10 @@ std::string vm_flags_of(const void* p) {
 }
 }  // namespace
 
-TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, values kept",
-          "[solver]") {
+TEST_CASE("LargeArrayAllocator: own mappings for large arrays, coloured, values kept", "[solver]") {
   using Mat7 = Eigen::Matrix<double, 7, 7>;
+  const bool huge_before = solver::large_array_huge_pages_enabled();
+  solver::set_large_array_huge_pages(true);
   solver::release_large_array_cache();
   CHECK(solver::large_array_cache_bytes() == 0);
   const std::size_t n_big = solver::kLargeArrayThreshold / sizeof(double) + 3;
@@ -558,6 +559,14 @@ TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, v
   CHECK(reinterpret_cast<std::uintptr_t>(small.data()) % 64 == 0);
   CHECK(small[2](6, 6) == 2.0);
   CHECK_THAT(vm_flags_of(small.data()), !Catch::Contains(" hg"));  // ordinary heap
+  {  // without the huge-page choice a new mapping is not marked
+    solver::set_large_array_huge_pages(false);
+    std::vector<double, solver::LargeArrayAllocator<double>> d(4 * n_big, 3.0);
+    CHECK(reinterpret_cast<std::uintptr_t>(d.data()) % 64 == 0);
+    CHECK(d.back() == 3.0);
+    CHECK_THAT(vm_flags_of(d.data()), !Catch::Contains(" hg"));
+    solver::set_large_array_huge_pages(true);
+  }
 
   // A freed mapping is kept and handed to the next array that fits; released on request.
   const double* old_b = b.data();
@@ -570,4 +579,5 @@ TEST_CASE("LargeArrayAllocator: huge-page mappings for large arrays, coloured, v
   decltype(a)().swap(a);
   solver::release_large_array_cache();
   CHECK(solver::large_array_cache_bytes() == 0);
+  solver::set_large_array_huge_pages(huge_before);
 }

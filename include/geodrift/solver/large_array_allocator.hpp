@@ -5,13 +5,22 @@
 /// and of its speculative twin, the geodesic-acceleration store; not the block Cholesky factor,
 /// whose factorisation ran 25-30 % slower on these mappings, BENCHMARKS.md round 6).
 ///
-/// Why: a solve first-touches all of these. With 4 KiB pages that is one page fault per 4 KiB,
-/// and on a virtual machine a fault is expensive: 11 µs per 4 KiB page measured on the
-/// project's 2-core VM (BENCHMARKS.md, round 6), ≈ 2.7 ms per MB, so the ≈ 160 MB that a
-/// 10k-keyframe Sim(3) solve touches cost ≈ 0.4 s before its first step. So:
-/// - Huge pages: arrays of at least kLargeArrayThreshold bytes get their own anonymous mapping,
-///   2 MiB aligned and marked MADV_HUGEPAGE, which the kernel backs with transparent huge pages
-///   (THP "madvise" mode, Debian's default): one fault per 2 MiB.
+/// Why: a solve first-touches all of these, and on a virtual machine a first touch can cost far
+/// more than the arithmetic that follows. How much, and which page size is cheaper, depends on
+/// the host (BENCHMARKS.md, rounds 6 and 7), so:
+/// - Page size: a choice, off by default. With set_large_array_huge_pages(true) (or the
+///   environment variable GEODRIFT_HUGE_PAGES=1, read once) new mappings are marked
+///   MADV_HUGEPAGE, which the kernel backs with transparent huge pages (THP "madvise" mode,
+///   Debian's default): one fault per 2 MiB and fewer TLB misses afterwards. Measured on two of
+///   the project's 2-core VMs, first touch of fresh memory:
+///     round 6's VM:   4 KiB pages 2.7 ms/MB (11 µs per fault), huge pages ≈ 1.5 ms/MB;
+///     round 7's VM:   4 KiB pages 0.4-0.66 ms/MB, huge pages 2.9-3.6 ms/MB (the host backs
+///                     each fresh 2 MiB page first), 0.05 ms/MB when reused in the process.
+///   On round 7's VM, in a fresh process, a 10k / 50k-keyframe accelerated Sim(3) drift solve
+///   spends 0.19-0.53 s / 2.0-2.6 s before its first step with huge pages and 0.19-0.22 s /
+///   0.65 s without; its steps are 5-15 % slower without (TLB misses). Huge pages pay where
+///   faults are expensive, where the arrays are reused, or right after another process freed
+///   as much memory (the 10k benchmark row after Ceres' rows).
 /// - Reuse: a freed mapping is kept (up to kLargeArrayCacheBytes in kLargeArrayCacheCount
 ///   mappings, oldest unmapped first) and handed to the next large array that fits, so repeated
 ///   solves (LM on the same problem again, the Corrector's windows, a benchmark's repetitions)
@@ -21,12 +30,13 @@
 ///   the same cache sets; each mapping's data starts at a rotating multiple of 33 cache lines.
 ///
 /// Purely a performance measure: where THP is off (or not Linux) the mappings use ordinary
-/// pages. If mmap fails: std::bad_alloc, as from operator new. Smaller arrays use the ordinary
-/// aligned operator new. Thread-safe.
+/// pages whatever the setting. If mmap fails: std::bad_alloc, as from operator new. Smaller arrays
+/// use the ordinary aligned operator new. Thread-safe.
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <mutex>
 #include <new>
 #include <vector>
@@ -37,14 +47,22 @@
 
 namespace geodrift::solver {
 
-/// Arrays of at least this many bytes get their own huge-page mapping.
+/// Arrays of at least this many bytes get their own 2 MiB-aligned mapping.
 inline constexpr std::size_t kLargeArrayThreshold = std::size_t{4} << 20;
 inline constexpr std::size_t kHugePageBytes = std::size_t{2} << 20;
 /// At most this many bytes / mappings are kept for reuse after their arrays are freed.
 inline constexpr std::size_t kLargeArrayCacheBytes = std::size_t{1} << 30;
 inline constexpr std::size_t kLargeArrayCacheCount = 32;
 
+inline bool large_array_huge_pages_enabled() noexcept;
+
 namespace detail {
+
+/// The page-size choice (see the file comment): -1 until first read, then 0 or 1.
+inline std::atomic<int>& huge_pages_setting() {
+  static std::atomic<int> setting{-1};
+  return setting;
+}
 
 inline std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
@@ -137,7 +155,8 @@ class LargeArrayCache {
     const std::uintptr_t tail = base + len, end = r + len + kHugePageBytes;
     if (end > tail) ::munmap(reinterpret_cast<void*>(tail), end - tail);
 #if defined(MADV_HUGEPAGE)
-    ::madvise(reinterpret_cast<void*>(base), len, MADV_HUGEPAGE);  // a hint: may fail, harmless
+    if (large_array_huge_pages_enabled())
+      ::madvise(reinterpret_cast<void*>(base), len, MADV_HUGEPAGE);  // a hint: may fail, harmless
 #endif
     auto* h = reinterpret_cast<LargeArrayHeader*>(base);
     h->length = len;
@@ -151,6 +170,31 @@ class LargeArrayCache {
   std::atomic<unsigned> next_colour_{0};
 };
 #endif
+
+}  // namespace detail
+
+/// Whether new large-array mappings ask for transparent huge pages (see the file comment).
+/// Until set_large_array_huge_pages() is called: true if the environment variable
+/// GEODRIFT_HUGE_PAGES is "1" when first asked, else false.
+inline bool large_array_huge_pages_enabled() noexcept {
+  std::atomic<int>& s = detail::huge_pages_setting();
+  int v = s.load(std::memory_order_relaxed);
+  if (v < 0) {
+    const char* e = std::getenv("GEODRIFT_HUGE_PAGES");
+    v = e && e[0] == '1' && e[1] == '\0' ? 1 : 0;
+    int expected = -1;
+    if (!s.compare_exchange_strong(expected, v)) v = expected;  // another thread decided first
+  }
+  return v == 1;
+}
+
+/// Marks (true) or stops marking (false) new large-array mappings MADV_HUGEPAGE. Mappings
+/// already made, including the kept ones, keep the page size they were made with.
+inline void set_large_array_huge_pages(bool on) noexcept {
+  detail::huge_pages_setting().store(on ? 1 : 0, std::memory_order_relaxed);
+}
+
+namespace detail {
 
 inline void* allocate_large_array(std::size_t bytes) {
 #if defined(__linux__)
