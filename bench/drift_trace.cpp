@@ -1,0 +1,42 @@
+// drift_trace: one accelerated LM solve of bench_solver's Sim(3) drift graph in a fresh process,
+// with its per-iteration trace (cost, accepted, λ, wall and CPU seconds since solve() started).
+// Where bench_solver's rows follow each other in one process (and reuse or inherit each other's
+// memory), this is the solve a user runs once: the fresh-process A/B of BENCHMARKS.md round 7.
+//
+// usage: drift_trace [keyframes = 10000] [lambda0 = 1e-8]
+//   GEODRIFT_HUGE_PAGES=1 puts the solver's large arrays on huge pages (large_array_allocator.hpp).
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "support/drift_graph.hpp"
+#include "support/our_problems.hpp"
+
+int main(int argc, char** argv) {
+  namespace gb = geodrift::bench;
+  namespace solver = geodrift::solver;
+  const int n = argc > 1 ? std::atoi(argv[1]) : 10000;
+  const double lambda0 = argc > 2 ? std::atof(argv[2]) : 1e-8;
+  if (n < 10 || n > 1000000 || !(lambda0 > 0.0)) {
+    std::fprintf(stderr, "usage: drift_trace [keyframes in 10..1000000] [lambda0 > 0]\n");
+    return 2;
+  }
+  gb::OurDriftGraph p(gb::make_drift_graph(n, 7));  // bench_solver's seed
+  solver::Options o;  // bench_solver's stopping rule and damping (accel_options there)
+  o.max_iterations = 200;
+  o.function_tolerance = 1e-6;
+  o.gradient_tolerance = 1e-10;
+  o.parameter_tolerance = 1e-8;
+  o.lambda_decrease_limit = 0.1;
+  o.geodesic_acceleration = true;
+  o.initial_lambda = lambda0;
+  solver::LevenbergMarquardt lm(o);
+  const solver::Summary s = lm.solve(&p.problem);
+  std::printf("%s\nhuge pages: %s\n", s.brief_report().c_str(),
+              solver::large_array_huge_pages_enabled() ? "yes" : "no");
+  for (const solver::IterationRecord& r : s.trace)
+    std::printf("iteration %2d  cost %.10g  %s  lambda %.3g  wall %.3f s  cpu %.3f s\n",
+                r.iteration, r.cost, r.accepted ? "accepted" : "rejected", r.lambda, r.time_wall,
+                r.time_cpu);
+  return s.converged() ? 0 : 1;
+}
