@@ -25,6 +25,7 @@
 #include "geodrift/io/g2o.hpp"
 #include "geodrift/solver/levenberg_marquardt.hpp"
 #include "support/ba_data.hpp"
+#include "support/bench_options.hpp"
 #include "support/drift_graph.hpp"
 #include "support/our_problems.hpp"
 #if GEODRIFT_HAVE_CERES
@@ -37,15 +38,18 @@ namespace solver = geodrift::solver;
 
 namespace {
 
-// ---- the shared stopping rule (Ceres' defaults, which both implement the same way) ----------
-constexpr int kMaxIterations = 200;
-constexpr double kFunctionTolerance = 1e-6;
-constexpr double kGradientTolerance = 1e-10;
-constexpr double kParameterTolerance = 1e-8;
+// ---- the shared stopping rule, seed and our options (support/bench_options.hpp) -------------
+using gb::accel_options;
+using gb::kFunctionTolerance;
+using gb::kGradientTolerance;
+using gb::kLowDampingLambda;
+using gb::kMaxIterations;
+using gb::kParameterTolerance;
+using gb::kSeed;
+using gb::our_options;
 
 const char* const kGraphs[] = {"sphere2500", "parking-garage", "torus3D", "cubicle"};
 const int kDriftSizes[] = {1000, 10000, 50000};
-const unsigned kSeed = 7;
 
 // ---- data, generated once per process (outside timed regions) -----------------------------
 const geodrift::io::G2oPoseGraph3D& graph(int k) {
@@ -91,18 +95,6 @@ std::map<std::string, Reference>& ceres_results() {
 
 double now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-solver::Options our_options(solver::LinearSolverType type, int threads) {
-  solver::Options o;
-  o.linear_solver = type;
-  o.num_threads = threads;
-  o.max_iterations = kMaxIterations;
-  o.function_tolerance = kFunctionTolerance;
-  o.gradient_tolerance = kGradientTolerance;
-  o.parameter_tolerance = kParameterTolerance;
-  o.lambda_decrease_limit = 0.1;  // Marquardt's factor as the limit of Nielsen's rule (see Options)
-  return o;
 }
 
 /// Runs `solve` (returns the summary) once per benchmark iteration, with `make` (untimed)
@@ -321,16 +313,7 @@ void BM_Linearize_Sim3Drift(benchmark::State& state) {
 }
 
 // ---- geodesic acceleration and the initial damping (Options::geodesic_acceleration) --------
-/// λ0 = 1e-8 on both sides (Ceres: initial trust-region radius 1e8): the drift graph's first
-/// iterations are limited by λ0 = 1e-4 (its soft directions, fixed by 1 m priors against 1e5
-/// edges, are damped ~60x), so the low-damping rows show each solver with that limit removed.
-constexpr double kLowDampingLambda = 1e-8;
-solver::Options accel_options(solver::LinearSolverType type, int threads, double lambda0) {
-  solver::Options o = our_options(type, threads);
-  o.geodesic_acceleration = true;
-  o.initial_lambda = lambda0;
-  return o;
-}
+// (accel_options() and kLowDampingLambda: support/bench_options.hpp)
 template <typename Make>
 void drift_variant(benchmark::State& state, const char* kind, solver::Options o, Make make) {
   const int n = static_cast<int>(state.range(0));

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "support/bench_options.hpp"
 #include "support/drift_graph.hpp"
 #include "support/our_problems.hpp"
 
@@ -16,21 +17,13 @@ int main(int argc, char** argv) {
   namespace gb = geodrift::bench;
   namespace solver = geodrift::solver;
   const int n = argc > 1 ? std::atoi(argv[1]) : 10000;
-  const double lambda0 = argc > 2 ? std::atof(argv[2]) : 1e-8;
+  const double lambda0 = argc > 2 ? std::atof(argv[2]) : gb::kLowDampingLambda;
   if (n < 10 || n > 1000000 || !(lambda0 > 0.0)) {
     std::fprintf(stderr, "usage: drift_trace [keyframes in 10..1000000] [lambda0 > 0]\n");
     return 2;
   }
-  gb::OurDriftGraph p(gb::make_drift_graph(n, 7));  // bench_solver's seed
-  solver::Options o;  // bench_solver's stopping rule and damping (accel_options there)
-  o.max_iterations = 200;
-  o.function_tolerance = 1e-6;
-  o.gradient_tolerance = 1e-10;
-  o.parameter_tolerance = 1e-8;
-  o.lambda_decrease_limit = 0.1;
-  o.geodesic_acceleration = true;
-  o.initial_lambda = lambda0;
-  solver::LevenbergMarquardt lm(o);
+  gb::OurDriftGraph p(gb::make_drift_graph(n, gb::kSeed));
+  solver::LevenbergMarquardt lm(gb::accel_options(solver::LinearSolverType::kAuto, 1, lambda0));
   const solver::Summary s = lm.solve(&p.problem);
   std::printf("%s\nhuge pages: %s\n", s.brief_report().c_str(),
               solver::large_array_huge_pages_enabled() ? "yes" : "no");

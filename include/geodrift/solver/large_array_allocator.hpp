@@ -54,15 +54,36 @@ inline constexpr std::size_t kHugePageBytes = std::size_t{2} << 20;
 inline constexpr std::size_t kLargeArrayCacheBytes = std::size_t{1} << 30;
 inline constexpr std::size_t kLargeArrayCacheCount = 32;
 
-inline bool large_array_huge_pages_enabled() noexcept;
-
 namespace detail {
-
 /// The page-size choice (see the file comment): -1 until first read, then 0 or 1.
 inline std::atomic<int>& huge_pages_setting() {
   static std::atomic<int> setting{-1};
   return setting;
 }
+}  // namespace detail
+
+/// Whether new large-array mappings ask for transparent huge pages (see the file comment).
+/// Until set_large_array_huge_pages() is called: true if the environment variable
+/// GEODRIFT_HUGE_PAGES is "1" when first asked, else false.
+inline bool large_array_huge_pages_enabled() noexcept {
+  std::atomic<int>& s = detail::huge_pages_setting();
+  int v = s.load(std::memory_order_relaxed);
+  if (v < 0) {
+    const char* e = std::getenv("GEODRIFT_HUGE_PAGES");
+    v = e && e[0] == '1' && e[1] == '\0' ? 1 : 0;
+    int expected = -1;
+    if (!s.compare_exchange_strong(expected, v)) v = expected;  // another thread decided first
+  }
+  return v == 1;
+}
+
+/// Marks (true) or stops marking (false) new large-array mappings MADV_HUGEPAGE. Mappings
+/// already made, including the kept ones, keep the page size they were made with.
+inline void set_large_array_huge_pages(bool on) noexcept {
+  detail::huge_pages_setting().store(on ? 1 : 0, std::memory_order_relaxed);
+}
+
+namespace detail {
 
 inline std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
@@ -170,31 +191,6 @@ class LargeArrayCache {
   std::atomic<unsigned> next_colour_{0};
 };
 #endif
-
-}  // namespace detail
-
-/// Whether new large-array mappings ask for transparent huge pages (see the file comment).
-/// Until set_large_array_huge_pages() is called: true if the environment variable
-/// GEODRIFT_HUGE_PAGES is "1" when first asked, else false.
-inline bool large_array_huge_pages_enabled() noexcept {
-  std::atomic<int>& s = detail::huge_pages_setting();
-  int v = s.load(std::memory_order_relaxed);
-  if (v < 0) {
-    const char* e = std::getenv("GEODRIFT_HUGE_PAGES");
-    v = e && e[0] == '1' && e[1] == '\0' ? 1 : 0;
-    int expected = -1;
-    if (!s.compare_exchange_strong(expected, v)) v = expected;  // another thread decided first
-  }
-  return v == 1;
-}
-
-/// Marks (true) or stops marking (false) new large-array mappings MADV_HUGEPAGE. Mappings
-/// already made, including the kept ones, keep the page size they were made with.
-inline void set_large_array_huge_pages(bool on) noexcept {
-  detail::huge_pages_setting().store(on ? 1 : 0, std::memory_order_relaxed);
-}
-
-namespace detail {
 
 inline void* allocate_large_array(std::size_t bytes) {
 #if defined(__linux__)
