@@ -109,8 +109,12 @@ struct Options {
   LinearSolverType linear_solver = LinearSolverType::kAuto;
   /// After an accepted step, evaluate the next trial point with Jacobians into a second copy of
   /// H and g (its cost decides the step as usual): when the step is accepted again, which is
-  /// the common case, the separate cost-only evaluation is saved. After a rejection trial points
-  /// are evaluated cost-only. Same steps either way; costs one more H in memory.
+  /// the common case, the separate cost-only evaluation is saved. The first trial (nothing is
+  /// known yet about how well λ0 fits the problem) and trials after a rejection are evaluated
+  /// cost-only. Same steps either way; costs one more H in memory. (On the 50k drift graph,
+  /// whose first trial at λ0 = 1e-8 is rejected, a cost-only first trial took the time to reach
+  /// Ceres' cost from 6.81 to 6.44 s CPU, medians of 6; on the 10k graph, whose first trial is
+  /// accepted, no change beyond noise: BENCHMARKS.md round 8.)
   bool speculative_linearization = true;
   /// Geodesic acceleration (M. K. Transtrum, J. P. Sethna, "Improvements to the
   /// Levenberg-Marquardt algorithm for nonlinear least-squares minimization", arXiv:1201.5885,
@@ -449,7 +453,8 @@ class LevenbergMarquardt {
     if (n == 0) return finish(Termination::kGradientTolerance, "no free parameters");
 
     double lambda = options_.initial_lambda, nu = 2.0;
-    bool relinearized = true, last_accepted = true, speculated = false;
+    // last_accepted starts false: the first trial is evaluated cost-only (see Options).
+    bool relinearized = true, last_accepted = false, speculated = false;
     while (true) {
       if (cost == 0.0) return done(sum, cost, lambda, Termination::kZeroCost, "", finish);
       if (relinearized) {
