@@ -453,8 +453,9 @@ class LevenbergMarquardt {
     if (n == 0) return finish(Termination::kGradientTolerance, "no free parameters");
 
     double lambda = options_.initial_lambda, nu = 2.0;
-    // last_accepted starts false: the first trial is evaluated cost-only (see Options).
-    bool relinearized = true, last_accepted = false, speculated = false;
+    // Speculate on the next trial only after an accepted step: the first trial and those after a
+    // rejection are evaluated cost-only (Options::speculative_linearization).
+    bool relinearized = true, speculate_next = false, speculated = false;
     while (true) {
       if (cost == 0.0) return done(sum, cost, lambda, Termination::kZeroCost, "", finish);
       if (relinearized) {
@@ -547,7 +548,7 @@ class LevenbergMarquardt {
         problem->save_state();
         problem->plus(delta_.data());
         bool eval_ok;
-        speculated = options_.speculative_linearization && last_accepted;
+        speculated = options_.speculative_linearization && speculate_next;
         if (speculated) {
           // Linearise the trial point into the spare buffers: its cost decides the step, and
           // if it is accepted H, g are ready (the buffers are swapped, no second evaluation).
@@ -573,7 +574,7 @@ class LevenbergMarquardt {
                     new_cost, rho, lambda);
       }
       record(rho > 0.0 ? new_cost : cost, rho > 0.0, lambda);
-      last_accepted = rho > 0.0;
+      speculate_next = rho > 0.0;
       if (rho > 0.0) {
         ++sum.successful_steps;
         const double old_cost = cost;
