@@ -33,10 +33,12 @@ inline solver::Options our_options(solver::LinearSolverType type, int threads) {
   return o;
 }
 
-/// our_options() with geodesic acceleration (Options::geodesic_acceleration) from λ0.
+/// our_options() with geodesic acceleration (Options::geodesic_acceleration) and backtracking
+/// along rejected steps (Options::backtracking) from λ0.
 inline solver::Options accel_options(solver::LinearSolverType type, int threads, double lambda0) {
   solver::Options o = our_options(type, threads);
   o.geodesic_acceleration = true;
+  o.backtracking = true;
   o.initial_lambda = lambda0;
   return o;
 }

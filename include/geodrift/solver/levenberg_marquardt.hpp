@@ -134,6 +134,16 @@ struct Options {
   bool geodesic_acceleration = false;
   double acceleration_step = 0.1;        ///< h of the finite difference (their choice 0.1)
   double max_acceleration_ratio = 0.75;  ///< α: largest accepted 2|a|/|v| (their 0.75)
+  /// Backtracking along a rejected step (J. Nocedal, Y. Yuan, "Combining trust region and line
+  /// search techniques", in Advances in Nonlinear Programming, Kluwer 1998): when the trial
+  /// point x ⊞ δ does not lower the cost, one cost-only evaluation at the shorter step
+  /// δ(t) = t·v + (t²/2)·a (the step's own curve: a = 0 without geodesic acceleration) is tried
+  /// before a new factorisation, t the minimiser of the quadratic through F(0), F'(0) = gᵀv and
+  /// F(1), kept in [0.1, 0.5]. If F(x ⊞ δ(t)) < F(x) that point is accepted and λ grows as after
+  /// a rejection (the full step was too long); otherwise the iteration is rejected as without
+  /// backtracking. Costs one cost-only evaluation per rejected step and saves a factorisation
+  /// and solve where the short step succeeds.
+  bool backtracking = false;
   /// Threads for evaluation and assembly: 1 or 2 (2 splits the residual blocks whose H blocks
   /// fall in disjoint column halves; the rest run on one thread).
   int num_threads = 1;
@@ -246,6 +256,8 @@ struct Summary {
   /// steps taken without it because it was too large relative to the velocity.
   int accelerated_steps = 0;
   int acceleration_fallbacks = 0;
+  /// Accepted steps that were shortened by backtracking (Options::backtracking).
+  int backtracked_steps = 0;
   double initial_cost = 0.0;  ///< ½Σρ at the start
   double final_cost = 0.0;    ///< ½Σρ at the returned states
   double final_lambda = 0.0;
@@ -505,11 +517,15 @@ class LevenbergMarquardt {
         step_ok = st == LinearSolverStatus::kSuccess && delta_.allFinite();
       }
       // L(0) − L(v) = ½ vᵀ(λDv − g), v the damped Gauss–Newton step (the velocity).
-      double model = 0.0;
+      double model = 0.0, gv = 0.0;
       if (step_ok) {
-        for (int c = 0; c < n; ++c) model += delta_[c] * (lambda * damp_[c] * delta_[c] - g_[c]);
+        for (int c = 0; c < n; ++c) {
+          model += delta_[c] * (lambda * damp_[c] * delta_[c] - g_[c]);
+          gv += g_[c] * delta_[c];
+        }
         model *= 0.5;
       }
+      bool accelerated = false;  // delta_ = v + a/2 with a in accel_
       if (step_ok && accel) {
         const auto ta = Clock::now();
         const bool aok = problem->acceleration_rhs(delta_.data(), options_.acceleration_step, cur,
@@ -529,6 +545,7 @@ class LevenbergMarquardt {
             if (4.0 * aa <=
                 options_.max_acceleration_ratio * options_.max_acceleration_ratio * vv) {
               delta_ += 0.5 * accel_;
+              accelerated = true;
               ++sum.accelerated_steps;
             } else {
               ++sum.acceleration_fallbacks;  // too large to trust: the plain step v
@@ -538,6 +555,7 @@ class LevenbergMarquardt {
       }
       double new_cost = std::numeric_limits<double>::infinity();
       double rho = -1.0;
+      bool backtracked = false;
       if (step_ok) {
         const double dnorm = delta_.norm();
         const double xnorm = problem->state_norm();
@@ -567,21 +585,51 @@ class LevenbergMarquardt {
         } else {
           problem->restore_state();
           rho = -1.0;
+          if (options_.backtracking && model > 0.0 && gv < 0.0) {
+            // F(t) ≈ F(0) + t·gᵀv + t²·(F(1) − F(0) − gᵀv); a failed or non-finite trial: t = ½.
+            double t = 0.5;
+            const double curv = eval_ok && std::isfinite(new_cost) ? new_cost - cost - gv : 0.0;
+            if (curv > 0.0) t = std::clamp(-gv / (2.0 * curv), 0.1, 0.5);
+            // δ(t) = t·v + (t²/2)·a from delta_ = v + a/2.
+            delta_ *= t;
+            if (accelerated) delta_ += (0.5 * t * t - 0.5 * t) * accel_;
+            problem->save_state();
+            problem->plus(delta_.data());
+            double bt_cost = std::numeric_limits<double>::infinity();
+            const auto te = Clock::now();
+            const bool bt_ok = problem->evaluate_cost(&bt_cost);
+            sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+            if (options_.verbose)
+              std::printf("LM it %3d backtrack t %.3g cost %.12g\n", sum.iterations, t, bt_cost);
+            if (bt_ok && std::isfinite(bt_cost) && bt_cost < cost) {
+              new_cost = bt_cost;
+              backtracked = true;
+              speculated = false;  // H2_, g2_ (if written) belong to the rejected full step
+            } else {
+              problem->restore_state();
+            }
+          }
         }
       }
       if (options_.verbose) {
         std::printf("LM it %3d cost %.12g new %.12g rho %.3g lambda %.3g\n", sum.iterations, cost,
                     new_cost, rho, lambda);
       }
-      record(rho > 0.0 ? new_cost : cost, rho > 0.0, lambda);
-      speculate_next = rho > 0.0;
-      if (rho > 0.0) {
+      const bool accept = rho > 0.0 || backtracked;
+      record(accept ? new_cost : cost, accept, lambda);
+      speculate_next = rho > 0.0;  // not after a backtracked step: the full step was too long
+      if (accept) {
         ++sum.successful_steps;
         const double old_cost = cost;
         cost = new_cost;
-        const double t = 2.0 * rho - 1.0;
-        lambda = std::max(options_.min_lambda,
-                          lambda * std::max(options_.lambda_decrease_limit, 1.0 - t * t * t));
+        if (backtracked) {
+          ++sum.backtracked_steps;
+          lambda *= nu;  // as after a rejection, ν back to 2 as after an acceptance
+        } else {
+          const double t = 2.0 * rho - 1.0;
+          lambda = std::max(options_.min_lambda,
+                            lambda * std::max(options_.lambda_decrease_limit, 1.0 - t * t * t));
+        }
         nu = 2.0;
         if (old_cost - new_cost <= options_.function_tolerance * old_cost) {
           return done(sum, cost, lambda, Termination::kFunctionTolerance,
