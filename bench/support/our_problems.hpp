@@ -154,14 +154,14 @@ inline FactorFloor cholmod_floor(solver::Problem* problem) {
   return cholmod_floor(s.num_cols(), s.col_ptr(), s.row_idx(), v);
 }
 
-/// The same H as cholmod_floor(problem), factorised by geodrift's BlockCholeskySolver (ordering
-/// chosen as in LM, analysis excluded), median of `reps`; flops = the block kernels' count.
-/// Returns zeros when the problem's blocks are not all of size 6 or 7.
-inline FactorFloor block_cholesky_floor(solver::Problem* problem, int reps = 5) {
+/// The same H as cholmod_floor(problem), factorised by one of geodrift's linear solvers
+/// (analysis excluded, ordering as in LM), median of `reps`. Zeros if the solver cannot analyse
+/// the problem.
+template <typename Solver>
+FactorFloor solver_floor(solver::Problem* problem, int reps = 5) {
   problem->finalize(false);
   const solver::BlockStructure& s = problem->structure();
   FactorFloor f;
-  if (solver::BlockCholeskySolver::supported_block_size(s) == 0) return f;
   solver::BlockSparseMatrix H(&s);
   std::vector<double> g(static_cast<std::size_t>(s.num_cols()));
   double cost = 0.0;
@@ -169,19 +169,31 @@ inline FactorFloor block_cholesky_floor(solver::Problem* problem, int reps = 5) 
   problem->linearize(&H, g.data(), &cost, &times);
   auto& v = H.value_vector();
   for (const int d : s.diagonal_positions()) v[static_cast<std::size_t>(d)] *= 1.0 + 1e-4;
-  solver::BlockCholeskySolver bc;
-  if (bc.analyze(s) != solver::LinearSolverStatus::kSuccess) return f;
+  Solver solver;
+  if (solver.analyze(s) != solver::LinearSolverStatus::kSuccess) return f;
   std::vector<double> t;
   for (int r = 0; r < reps; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (bc.factorize(H) != solver::LinearSolverStatus::kSuccess) return f;
+    if (solver.factorize(H) != solver::LinearSolverStatus::kSuccess) return f;
     t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   std::sort(t.begin(), t.end());
   f.median_seconds = t[t.size() / 2];
-  f.nnz_factor = bc.factor_nnz();
-  f.flops = bc.flops();
+  f.nnz_factor = solver.factor_nnz();
   f.n = s.num_cols();
+  return f;
+}
+
+/// solver_floor() with geodrift's BlockCholeskySolver; flops = the block kernels' count.
+/// Returns zeros when the problem's blocks are not all of size 6 or 7.
+inline FactorFloor block_cholesky_floor(solver::Problem* problem, int reps = 5) {
+  problem->finalize(false);
+  if (solver::BlockCholeskySolver::supported_block_size(problem->structure()) == 0) return {};
+  FactorFloor f = solver_floor<solver::BlockCholeskySolver>(problem, reps);
+  solver::BlockCholeskySolver bc;
+  if (f.median_seconds > 0.0 &&
+      bc.analyze(problem->structure()) == solver::LinearSolverStatus::kSuccess)
+    f.flops = bc.flops();
   return f;
 }
 

@@ -471,25 +471,31 @@ TEST_CASE("CHOLMOD and dense solvers agree; not positive definite is a status", 
   for (int c = 0; c < s.num_cols(); ++c) H.values()[s.diagonal_positions()[c]] += 0.1;
   Eigen::VectorXd b(s.num_cols()), x1(s.num_cols()), x2(s.num_cols());
   for (int i = 0; i < b.size(); ++i) b[i] = n(rng);
-  solver::CholmodSolver chol;
-  solver::DenseSolver dense;
-  REQUIRE(chol.analyze(s) == solver::LinearSolverStatus::kSuccess);
-  REQUIRE(dense.analyze(s) == solver::LinearSolverStatus::kSuccess);
-  REQUIRE(chol.factorize(H) == solver::LinearSolverStatus::kSuccess);
-  REQUIRE(dense.factorize(H) == solver::LinearSolverStatus::kSuccess);
-  CHECK(chol.is_supernodal());
-  REQUIRE(chol.solve(b.data(), x1.data()) == solver::LinearSolverStatus::kSuccess);
-  REQUIRE(dense.solve(b.data(), x2.data()) == solver::LinearSolverStatus::kSuccess);
-  CHECK(test::near(x1, x2, 1e-10));
-  CHECK(test::near(H.to_dense() * x1, b, 1e-10));
-  // Break positive definiteness: both report it, no exception.
-  H.values()[s.diagonal_positions()[4]] = -100.0;
-  CHECK(chol.factorize(H) == solver::LinearSolverStatus::kNotPositiveDefinite);
-  CHECK_THAT(chol.message(), Catch::Contains("not positive definite"));
-  CHECK(dense.factorize(H) == solver::LinearSolverStatus::kNotPositiveDefinite);
-  // And recover on the next values.
-  H.values()[s.diagonal_positions()[4]] = 1e3;
-  CHECK(chol.factorize(H) == solver::LinearSolverStatus::kSuccess);
+  // Both orderings: block AMD (CholmodSolver gathers P·H·Pᵀ itself) and CHOLMOD's scalar AMD.
+  for (const auto ordering :
+       {solver::CholmodSolver::Ordering::kBlockAmd, solver::CholmodSolver::Ordering::kAmd}) {
+    INFO("ordering " << static_cast<int>(ordering));
+    solver::BlockSparseMatrix Hk = H;
+    solver::CholmodSolver chol(ordering);
+    solver::DenseSolver dense;
+    REQUIRE(chol.analyze(s) == solver::LinearSolverStatus::kSuccess);
+    REQUIRE(dense.analyze(s) == solver::LinearSolverStatus::kSuccess);
+    REQUIRE(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+    REQUIRE(dense.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+    CHECK(chol.is_supernodal());
+    REQUIRE(chol.solve(b.data(), x1.data()) == solver::LinearSolverStatus::kSuccess);
+    REQUIRE(dense.solve(b.data(), x2.data()) == solver::LinearSolverStatus::kSuccess);
+    CHECK(test::near(x1, x2, 1e-10));
+    CHECK(test::near(Hk.to_dense() * x1, b, 1e-10));
+    // Break positive definiteness: both report it, no exception; the message names H's column.
+    Hk.values()[s.diagonal_positions()[4]] = -100.0;
+    CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
+    CHECK_THAT(chol.message(), Catch::Contains("not positive definite (column 4)"));
+    CHECK(dense.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
+    // And recover on the next values.
+    Hk.values()[s.diagonal_positions()[4]] = 1e3;
+    CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+  }
 }
 
 TEST_CASE("Options::check_jacobians catches a wrong analytic Jacobian", "[solver][jacobian]") {

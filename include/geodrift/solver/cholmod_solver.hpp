@@ -6,7 +6,9 @@
 
 #include <cholmod.h>
 
+#include <algorithm>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "geodrift/solver/linear_solver.hpp"
@@ -18,9 +20,18 @@ namespace geodrift::solver {
 ///    expanded to scalar columns; cheaper than AMD on the scalar pattern and as good for
 ///    fixed-size blocks), then CHOLMOD's supernodal symbolic analysis. Runs once per pattern;
 ///    LevenbergMarquardt calls it again only when the pattern changes.
-///  - factorize(): numeric supernodal LLᵀ on a cholmod_sparse VIEW of H's CSC arrays (no copy
-///    on our side; CHOLMOD itself forms P·H·Pᵀ internally), with quick_return_if_not_posdef.
-///  - solve(): cholmod_solve2 with workspaces kept between calls.
+///  - factorize(), default ordering: H's upper triangle is gathered into the lower triangle of
+///    P·H·Pᵀ (a CSC whose pattern and gather map analyze() built), which CHOLMOD factorises in
+///    its natural order, i.e. as is. Given H itself with a permutation, cholmod_factorize forms
+///    P·H·Pᵀ in a matrix it allocates and frees on every call (cholmod_ptranspose), which for
+///    these sizes (tens to hundreds of MB) comes from fresh pages each time; the gather writes
+///    into memory kept between calls. For that, analyze() combines the block AMD ordering with
+///    a postorder of its block elimination tree (what CHOLMOD's own postordering would do, so
+///    the supernodes are the same) and analyses P·H·Pᵀ with the natural ordering. With
+///    quick_return_if_not_posdef.
+///  - solve(): b permuted, cholmod_solve2 (workspaces kept between calls), x permuted back.
+///  - Ordering::kAmd (CHOLMOD's AMD on the scalar pattern): a cholmod_sparse VIEW of H's CSC
+///    arrays, CHOLMOD permutes internally.
 /// CHOLMOD's printing is silenced (print = 0, no error handler); its status maps onto
 /// LinearSolverStatus with a message.
 class CholmodSolver final : public LinearSolver {
@@ -70,13 +81,22 @@ class CholmodSolver final : public LinearSolver {
       if (nb > 0 && !cholmod_amd(&B, nullptr, 0, block_perm.data(), &cc_)) {
         return fail("cholmod_amd on the block pattern failed");
       }
+      postorder_blocks(s, &block_perm);
       perm_.resize(n_);
       int k = 0;
       for (int q = 0; q < nb; ++q) {
         const int b = block_perm[q];
         for (int j = 0; j < s.block_size(b); ++j) perm_[k++] = s.block_col(b) + j;
       }
-      L_ = cholmod_analyze_p(&A, perm_.data(), nullptr, 0, &cc_);
+      build_permuted_lower(s, block_perm);
+      cholmod_sparse P = permuted_view();
+      P.xtype = CHOLMOD_PATTERN;
+      // Natural order, no postorder: L->ordering stays CHOLMOD_NATURAL, so cholmod_factorize
+      // takes P as it is (see the class comment).
+      cc_.method[0].ordering = CHOLMOD_NATURAL;
+      cc_.postorder = 0;
+      L_ = cholmod_analyze(&P, &cc_);
+      if (L_ && L_->ordering != CHOLMOD_NATURAL) return fail("analysis is not in natural order");
     } else {
       L_ = cholmod_analyze(&A, &cc_);
     }
@@ -88,10 +108,23 @@ class CholmodSolver final : public LinearSolver {
     message_.clear();
     if (!L_) return fail("factorize() before analyze()");
     if (H.rows() != n_) return fail("matrix size differs from the analysed one");
-    cholmod_sparse A = view(H.structure(), H.values());
-    cholmod_factorize(&A, L_, &cc_);
+    if (permuted()) {
+      const double* hv = H.values();
+      const int* src = gather_.data();
+      double* dst = px_.data();
+      const std::size_t nnz = gather_.size();
+      for (std::size_t k = 0; k < nnz; ++k) dst[k] = hv[src[k]];
+      cholmod_sparse P = permuted_view();
+      cholmod_factorize(&P, L_, &cc_);
+    } else {
+      cholmod_sparse A = view(H.structure(), H.values());
+      cholmod_factorize(&A, L_, &cc_);
+    }
     if (cc_.status == CHOLMOD_NOT_POSDEF || (cc_.status >= CHOLMOD_OK && L_->minor < L_->n)) {
-      message_ = "CHOLMOD: matrix not positive definite (column " + std::to_string(L_->minor) + ")";
+      // L_->minor counts columns of P·H·Pᵀ on the permuted path: name H's column.
+      const std::size_t minor = L_->minor;
+      const long col = permuted() && minor < perm_.size() ? perm_[minor] : static_cast<long>(minor);
+      message_ = "CHOLMOD: matrix not positive definite (column " + std::to_string(col) + ")";
       return LinearSolverStatus::kNotPositiveDefinite;
     }
     if (cc_.status < CHOLMOD_OK) return fail("cholmod_factorize failed");
@@ -105,7 +138,12 @@ class CholmodSolver final : public LinearSolver {
     B.ncol = 1;
     B.nzmax = B.nrow;
     B.d = B.nrow;
-    B.x = const_cast<double*>(b);
+    if (permuted()) {  // P·H·Pᵀ·(P·x) = P·b
+      for (int i = 0; i < n_; ++i) pb_[i] = b[perm_[i]];
+      B.x = pb_.data();
+    } else {
+      B.x = const_cast<double*>(b);
+    }
     B.xtype = CHOLMOD_REAL;
     B.dtype = CHOLMOD_DOUBLE;
     if (!cholmod_solve2(CHOLMOD_A, L_, &B, nullptr, &X_, nullptr, &Y_, &E_, &cc_) ||
@@ -113,7 +151,11 @@ class CholmodSolver final : public LinearSolver {
       return fail("cholmod_solve2 failed");
     }
     const double* xs = static_cast<const double*>(X_->x);
-    for (int i = 0; i < n_; ++i) x[i] = xs[i];
+    if (permuted()) {
+      for (int i = 0; i < n_; ++i) x[perm_[i]] = xs[i];
+    } else {
+      for (int i = 0; i < n_; ++i) x[i] = xs[i];
+    }
     return LinearSolverStatus::kSuccess;
   }
 
@@ -140,6 +182,155 @@ class CholmodSolver final : public LinearSolver {
     return A;
   }
 
+  bool permuted() const { return ordering_ == Ordering::kBlockAmd; }
+
+  /// Replaces the block order `order` (position -> block) by a postorder of the elimination
+  /// tree of the block pattern in that order, children before parents (J. W. H. Liu, "The role
+  /// of elimination trees in sparse factorization", SIAM J. Matrix Anal. Appl. 11(1), 1990:
+  /// the tree by path-compressed ancestor walks, then a depth-first postorder). Same fill;
+  /// every chain of the tree becomes consecutive columns, which CHOLMOD merges into supernodes.
+  static void postorder_blocks(const BlockStructure& s, std::vector<int>* order) {
+    const int nb = s.num_blocks();
+    std::vector<int> pos(static_cast<std::size_t>(nb));
+    for (int q = 0; q < nb; ++q) pos[(*order)[q]] = q;
+    // Neighbours of each position at smaller positions (the upper pattern in the new order).
+    std::vector<int> cnt(static_cast<std::size_t>(nb) + 1, 0);
+    const auto& bcp = s.block_col_ptr();
+    const auto& brow = s.block_rows();
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        if (brow[k] != b) ++cnt[std::max(pos[brow[k]], pos[b]) + 1];
+    for (int q = 0; q < nb; ++q) cnt[q + 1] += cnt[q];
+    std::vector<int> nbr(static_cast<std::size_t>(cnt[nb])), fill(cnt.begin(), cnt.end() - 1);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k)
+        if (brow[k] != b) {
+          const int i = pos[brow[k]], j = pos[b];
+          nbr[fill[std::max(i, j)]++] = std::min(i, j);
+        }
+    std::vector<int> parent(static_cast<std::size_t>(nb), -1), ancestor(parent);
+    for (int j = 0; j < nb; ++j)
+      for (int p = cnt[j]; p < cnt[j + 1]; ++p)
+        for (int i = nbr[p]; i != -1 && i < j;) {
+          const int next = ancestor[i];
+          ancestor[i] = j;
+          if (next == -1) parent[i] = j;
+          i = next;
+        }
+    // Children lists (ascending), then an iterative depth-first postorder from each root.
+    std::vector<int> head(static_cast<std::size_t>(nb), -1), next(head), stack;
+    for (int j = nb - 1; j >= 0; --j)
+      if (parent[j] >= 0) {
+        next[j] = head[parent[j]];
+        head[parent[j]] = j;
+      }
+    std::vector<int> post;
+    post.reserve(static_cast<std::size_t>(nb));
+    for (int r = 0; r < nb; ++r) {
+      if (parent[r] != -1) continue;
+      stack.push_back(r);
+      while (!stack.empty()) {
+        const int v = stack.back();
+        if (head[v] >= 0) {  // descend into the next unvisited child
+          const int c = head[v];
+          head[v] = next[c];
+          stack.push_back(c);
+        } else {
+          post.push_back(v);
+          stack.pop_back();
+        }
+      }
+    }
+    std::vector<int> out(static_cast<std::size_t>(nb));
+    for (int q = 0; q < nb; ++q) out[q] = (*order)[post[q]];
+    *order = std::move(out);
+  }
+
+  /// The lower-triangular CSC of P·H·Pᵀ (P: the block order `order`, position -> block, as
+  /// perm_), rows ascending, and gather_: for each of its entries, the index of the same entry of
+  /// H's upper triangle in H's value array. Built block by block: each upper block of H lands,
+  /// whole or transposed, below the diagonal of its new block column, and the blocks of one new
+  /// column are visited in ascending new block row.
+  void build_permuted_lower(const BlockStructure& s, const std::vector<int>& order) {
+    const int nb = s.num_blocks();
+    std::vector<int> pos(static_cast<std::size_t>(nb)), start(static_cast<std::size_t>(nb) + 1, 0);
+    for (int q = 0; q < nb; ++q) {
+      pos[order[q]] = q;
+      start[q + 1] = start[q] + s.block_size(order[q]);
+    }
+    const auto& bcp = s.block_col_ptr();
+    const auto& brow = s.block_rows();
+    const auto& boff = s.block_offsets();
+    struct Placed {
+      int row_pos;  ///< new block row I (≥ the column's J)
+      int k;        ///< index of the upper block (a, b) of H in the block CSC
+      int b;        ///< its block column in H
+    };
+    std::vector<int> bucket(static_cast<std::size_t>(nb) + 1, 0);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) ++bucket[std::min(pos[brow[k]], pos[b]) + 1];
+    for (int q = 0; q < nb; ++q) bucket[q + 1] += bucket[q];
+    std::vector<Placed> placed(static_cast<std::size_t>(bucket[nb]));
+    std::vector<int> fill(bucket.begin(), bucket.end() - 1);
+    for (int b = 0; b < nb; ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) {
+        const int qa = pos[brow[k]], qb = pos[b];
+        placed[fill[std::min(qa, qb)]++] = {std::max(qa, qb), k, b};
+      }
+    pp_.assign(static_cast<std::size_t>(n_) + 1, 0);
+    pi_.clear();
+    gather_.clear();
+    pi_.reserve(static_cast<std::size_t>(s.num_values()));
+    gather_.reserve(static_cast<std::size_t>(s.num_values()));
+    for (int J = 0; J < nb; ++J) {
+      const auto first = placed.begin() + bucket[J], last = placed.begin() + bucket[J + 1];
+      std::sort(first, last,
+                [](const Placed& x, const Placed& y) { return x.row_pos < y.row_pos; });
+      const int wJ = start[J + 1] - start[J];
+      for (int t = 0; t < wJ; ++t) {  // scalar column start[J] + t
+        for (auto it = first; it != last; ++it) {
+          const int a = brow[it->k], b = it->b, stride = s.column_height(b), off = boff[it->k];
+          const int rows = start[it->row_pos + 1] - start[it->row_pos];
+          if (a == b) {  // diagonal block: its upper entries (t, u), u ≥ t, become rows u
+            for (int u = t; u < rows; ++u) {
+              pi_.push_back(start[J] + u);
+              gather_.push_back(off + u * stride + t);
+            }
+          } else if (pos[a] > pos[b]) {  // stays below the diagonal: column t of the block
+            for (int r = 0; r < rows; ++r) {
+              pi_.push_back(start[it->row_pos] + r);
+              gather_.push_back(off + t * stride + r);
+            }
+          } else {  // transposed: row t of the block becomes the column
+            for (int c = 0; c < rows; ++c) {
+              pi_.push_back(start[it->row_pos] + c);
+              gather_.push_back(off + c * stride + t);
+            }
+          }
+        }
+        pp_[start[J] + t + 1] = static_cast<int>(pi_.size());
+      }
+    }
+    px_.assign(pi_.size(), 0.0);
+    pb_.assign(static_cast<std::size_t>(n_), 0.0);
+  }
+
+  cholmod_sparse permuted_view() {
+    cholmod_sparse P{};
+    P.nrow = P.ncol = static_cast<size_t>(n_);
+    P.nzmax = px_.size();
+    P.p = pp_.data();
+    P.i = pi_.data();
+    P.x = px_.data();
+    P.stype = -1;  // lower triangle
+    P.itype = CHOLMOD_INT;
+    P.xtype = CHOLMOD_REAL;
+    P.dtype = CHOLMOD_DOUBLE;
+    P.sorted = 1;
+    P.packed = 1;
+    return P;
+  }
+
   LinearSolverStatus fail(const std::string& what) {
     message_ = "CHOLMOD: " + what + " (status " + std::to_string(cc_.status) + ")";
     return LinearSolverStatus::kFatal;
@@ -158,8 +349,12 @@ class CholmodSolver final : public LinearSolver {
   cholmod_dense* X_ = nullptr;
   cholmod_dense* Y_ = nullptr;
   cholmod_dense* E_ = nullptr;
-  std::vector<int> perm_;
+  std::vector<int> perm_;     ///< new position -> H column (kBlockAmd)
   std::vector<int> row_idx_;  ///< scalar row indices of the analysed pattern
+  std::vector<int> pp_, pi_;  ///< CSC of the lower triangle of P·H·Pᵀ (kBlockAmd)
+  std::vector<int> gather_;   ///< its entries' indices in H's value array
+  std::vector<double> px_;    ///< its values, gathered by factorize()
+  std::vector<double> pb_;    ///< P·b in solve()
   int n_ = 0;
 };
 
