@@ -61,22 +61,11 @@ class CholmodSolver final : public LinearSolver {
     free_factor();
     n_ = s.num_cols();
     row_idx_ = s.row_idx();
-    cholmod_sparse A = view(s, nullptr);
-    A.xtype = CHOLMOD_PATTERN;
     if (ordering_ == Ordering::kBlockAmd) {
       const int nb = s.num_blocks();
       // Block pattern (upper, with diagonal) as a CHOLMOD pattern matrix.
-      cholmod_sparse B{};
-      B.nrow = B.ncol = static_cast<size_t>(nb);
-      B.nzmax = s.block_rows().size();
-      B.p = const_cast<int*>(s.block_col_ptr().data());
-      B.i = const_cast<int*>(s.block_rows().data());
-      B.stype = 1;
-      B.itype = CHOLMOD_INT;
-      B.xtype = CHOLMOD_PATTERN;
-      B.dtype = CHOLMOD_DOUBLE;
-      B.sorted = 1;
-      B.packed = 1;
+      cholmod_sparse B = csc(nb, s.block_rows().size(), s.block_col_ptr().data(),
+                             s.block_rows().data(), nullptr, 1);
       std::vector<int> block_perm(nb);
       if (nb > 0 && !cholmod_amd(&B, nullptr, 0, block_perm.data(), &cc_)) {
         return fail("cholmod_amd on the block pattern failed");
@@ -98,6 +87,7 @@ class CholmodSolver final : public LinearSolver {
       L_ = cholmod_analyze(&P, &cc_);
       if (L_ && L_->ordering != CHOLMOD_NATURAL) return fail("analysis is not in natural order");
     } else {
+      cholmod_sparse A = view(s, nullptr);  // pattern only
       L_ = cholmod_analyze(&A, &cc_);
     }
     if (!L_ || cc_.status < CHOLMOD_OK) return fail("cholmod_analyze failed");
@@ -165,21 +155,29 @@ class CholmodSolver final : public LinearSolver {
   bool is_supernodal() const { return L_ && L_->is_super; }
 
  private:
-  // The analysed pattern's scalar CSC (row indices from analyze()) with `values`.
-  cholmod_sparse view(const BlockStructure& s, const double* values) {
+  /// A cholmod_sparse header over packed, sorted CSC arrays we own (CHOLMOD never frees them).
+  static cholmod_sparse csc(int n, std::size_t nnz, const int* p, const int* i, const double* x,
+                            int stype) {
     cholmod_sparse A{};
-    A.nrow = A.ncol = static_cast<size_t>(s.num_cols());
-    A.nzmax = static_cast<size_t>(s.num_values());
-    A.p = const_cast<int*>(s.col_ptr().data());
-    A.i = row_idx_.data();
-    A.x = const_cast<double*>(values);
-    A.stype = 1;  // upper triangle used; lower entries of diagonal blocks ignored
+    A.nrow = A.ncol = static_cast<size_t>(n);
+    A.nzmax = nnz;
+    A.p = const_cast<int*>(p);
+    A.i = const_cast<int*>(i);
+    A.x = const_cast<double*>(x);
+    A.stype = stype;
     A.itype = CHOLMOD_INT;
-    A.xtype = CHOLMOD_REAL;
+    A.xtype = x ? CHOLMOD_REAL : CHOLMOD_PATTERN;
     A.dtype = CHOLMOD_DOUBLE;
     A.sorted = 1;
     A.packed = 1;
     return A;
+  }
+
+  // The analysed pattern's scalar CSC (row indices from analyze()) with `values`; the upper
+  // triangle is used, lower entries of diagonal blocks are ignored.
+  cholmod_sparse view(const BlockStructure& s, const double* values) {
+    return csc(s.num_cols(), static_cast<std::size_t>(s.num_values()), s.col_ptr().data(),
+               row_idx_.data(), values, 1);
   }
 
   bool permuted() const { return ordering_ == Ordering::kBlockAmd; }
@@ -315,20 +313,9 @@ class CholmodSolver final : public LinearSolver {
     pb_.assign(static_cast<std::size_t>(n_), 0.0);
   }
 
+  /// The lower triangle of P·H·Pᵀ (values as last gathered).
   cholmod_sparse permuted_view() {
-    cholmod_sparse P{};
-    P.nrow = P.ncol = static_cast<size_t>(n_);
-    P.nzmax = px_.size();
-    P.p = pp_.data();
-    P.i = pi_.data();
-    P.x = px_.data();
-    P.stype = -1;  // lower triangle
-    P.itype = CHOLMOD_INT;
-    P.xtype = CHOLMOD_REAL;
-    P.dtype = CHOLMOD_DOUBLE;
-    P.sorted = 1;
-    P.packed = 1;
-    return P;
+    return csc(n_, px_.size(), pp_.data(), pi_.data(), px_.data(), -1);
   }
 
   LinearSolverStatus fail(const std::string& what) {
