@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "geodrift/lie/se3.hpp"
@@ -921,6 +922,17 @@ struct DriftChain {
   }
 };
 
+/// LM with oa on chain a and with ob on chain b (two copies of one chain): their summaries.
+std::pair<solver::Summary, solver::Summary> solve_both(DriftChain* a, DriftChain* b,
+                                                       const Options& oa, const Options& ob) {
+  Problem pa, pb;
+  a->build(&pa);
+  b->build(&pb);
+  LevenbergMarquardt lma(oa), lmb(ob);
+  const solver::Summary sa = lma.solve(&pa);
+  return {sa, lmb.solve(&pb)};
+}
+
 /// First iteration whose cost is within rel of `target`.
 int iterations_to_reach(const solver::Summary& s, double target, double rel) {
   for (const auto& r : s.trace)
@@ -964,16 +976,12 @@ TEST_CASE("Geodesic acceleration reaches the same optima, sooner on a drifting S
   // start), one and two threads.
   for (int threads : {1, 2}) {
     DriftChain a(600, 0.02, 3), b(600, 0.02, 3);
-    Problem pa, pb;
-    a.build(&pa);
-    b.build(&pb);
     Options oa;
     oa.initial_lambda = 1e-8;
     oa.num_threads = threads;
     Options ob = oa;
     ob.geodesic_acceleration = true;
-    LevenbergMarquardt lma(oa), lmb(ob);
-    const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+    const auto [sa, sb] = solve_both(&a, &b, oa, ob);
     INFO(sa.brief_report() << "\n" << sb.brief_report());
     REQUIRE(sa.converged());
     REQUIRE(sb.converged());
@@ -995,16 +1003,12 @@ TEST_CASE("Backtracking along a rejected step saves factorisations, same optimum
   // step t·v + (t²/2)·a lowers the cost instead (28 → 20 and 12 → 7 linear solves).
   for (bool accel : {false, true}) {
     DriftChain a(600, 0.04, 3), b(600, 0.04, 3);
-    Problem pa, pb;
-    a.build(&pa);
-    b.build(&pb);
     Options oa;
     oa.initial_lambda = 1e-8;
     oa.geodesic_acceleration = accel;
     Options ob = oa;
     ob.backtracking = true;
-    LevenbergMarquardt lma(oa), lmb(ob);
-    const solver::Summary sa = lma.solve(&pa), sb = lmb.solve(&pb);
+    const auto [sa, sb] = solve_both(&a, &b, oa, ob);
     INFO("accel " << accel << "\n" << sa.brief_report() << "\n" << sb.brief_report());
     REQUIRE(sa.converged());
     REQUIRE(sb.converged());

@@ -71,12 +71,6 @@ class CholmodSolver final : public LinearSolver {
         return fail("cholmod_amd on the block pattern failed");
       }
       postorder_blocks(s, &block_perm);
-      perm_.resize(n_);
-      int k = 0;
-      for (int q = 0; q < nb; ++q) {
-        const int b = block_perm[q];
-        for (int j = 0; j < s.block_size(b); ++j) perm_[k++] = s.block_col(b) + j;
-      }
       build_permuted_lower(s, block_perm);
       cholmod_sparse P = permuted_view();
       P.xtype = CHOLMOD_PATTERN;
@@ -244,17 +238,20 @@ class CholmodSolver final : public LinearSolver {
     *order = std::move(out);
   }
 
-  /// The lower-triangular CSC of P·H·Pᵀ (P: the block order `order`, position -> block, as
-  /// perm_), rows ascending, and gather_: for each of its entries, the index of the same entry of
-  /// H's upper triangle in H's value array. Built block by block: each upper block of H lands,
-  /// whole or transposed, below the diagonal of its new block column, and the blocks of one new
-  /// column are visited in ascending new block row.
+  /// perm_ (the block order `order`, position -> block, expanded to scalar columns), the
+  /// lower-triangular CSC of P·H·Pᵀ for that P, rows ascending, and gather_: for each of its
+  /// entries, the index of the same entry of H's upper triangle in H's value array. Built block by
+  /// block: each upper block of H lands, whole or transposed, below the diagonal of its new block
+  /// column, and the blocks of one new column are visited in ascending new block row.
   void build_permuted_lower(const BlockStructure& s, const std::vector<int>& order) {
     const int nb = s.num_blocks();
     std::vector<int> pos(static_cast<std::size_t>(nb)), start(static_cast<std::size_t>(nb) + 1, 0);
+    perm_.resize(static_cast<std::size_t>(n_));
     for (int q = 0; q < nb; ++q) {
-      pos[order[q]] = q;
-      start[q + 1] = start[q] + s.block_size(order[q]);
+      const int b = order[q];
+      pos[b] = q;
+      start[q + 1] = start[q] + s.block_size(b);
+      for (int j = 0; j < s.block_size(b); ++j) perm_[start[q] + j] = s.block_col(b) + j;
     }
     const auto& bcp = s.block_col_ptr();
     const auto& brow = s.block_rows();

@@ -508,6 +508,15 @@ class LevenbergMarquardt {
         sum.time_solve += std::chrono::duration<double>(Clock::now() - ts).count();
         return s2;
       };
+      // The cost at x ⊞ delta_, cost-only (timed as evaluation); the states stay there (saved).
+      const auto cost_at_step = [&](double* c) {
+        problem->save_state();
+        problem->plus(delta_.data());
+        const auto te = Clock::now();
+        const bool ok_c = problem->evaluate_cost(c);
+        sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+        return ok_c;
+      };
       bool step_ok = st == LinearSolverStatus::kSuccess;
       if (step_ok) {
         st = solve_neg(g_, &delta_);
@@ -563,22 +572,20 @@ class LevenbergMarquardt {
           return done(sum, cost, lambda, Termination::kParameterTolerance,
                       "|delta| = " + num(dnorm), finish);
         }
-        problem->save_state();
-        problem->plus(delta_.data());
         bool eval_ok;
         speculated = options_.speculative_linearization && speculate_next;
         if (speculated) {
           // Linearise the trial point into the spare buffers: its cost decides the step, and
           // if it is accepted H, g are ready (the buffers are swapped, no second evaluation).
+          problem->save_state();
+          problem->plus(delta_.data());
           LinearizeTimes lt2;
           eval_ok =
               problem->linearize(&H2_, g2_.data(), &new_cost, &lt2, &err, accel ? 1 - cur : -1);
           sum.time_evaluate += lt2.evaluate;
           sum.time_assemble += lt2.assemble;
         } else {
-          const auto te = Clock::now();
-          eval_ok = problem->evaluate_cost(&new_cost);
-          sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+          eval_ok = cost_at_step(&new_cost);
         }
         if (eval_ok && std::isfinite(new_cost) && new_cost < cost && model > 0.0) {
           rho = (cost - new_cost) / model;
@@ -593,12 +600,8 @@ class LevenbergMarquardt {
             // δ(t) = t·v + (t²/2)·a from delta_ = v + a/2.
             delta_ *= t;
             if (accelerated) delta_ += (0.5 * t * t - 0.5 * t) * accel_;
-            problem->save_state();
-            problem->plus(delta_.data());
             double bt_cost = std::numeric_limits<double>::infinity();
-            const auto te = Clock::now();
-            const bool bt_ok = problem->evaluate_cost(&bt_cost);
-            sum.time_evaluate += std::chrono::duration<double>(Clock::now() - te).count();
+            const bool bt_ok = cost_at_step(&bt_cost);
             if (options_.verbose)
               std::printf("LM it %3d backtrack t %.3g cost %.12g\n", sum.iterations, t, bt_cost);
             if (bt_ok && std::isfinite(bt_cost) && bt_cost < cost) {
