@@ -2,7 +2,10 @@
 // random graph with fill, every ordering, block sizes 6 and 7), not-positive-definite / NaN as a
 // status, unsupported structures rejected.
 
+#include <Eigen/Cholesky>
+#include <algorithm>
 #include <catch2/catch.hpp>
+#include <limits>
 #include <random>
 #include <set>
 #include <utility>
@@ -11,6 +14,7 @@
 #include "geodrift/solver/block_cholesky_solver.hpp"
 #include "geodrift/solver/block_sparse_matrix.hpp"
 #include "geodrift/solver/cholmod_solver.hpp"
+#include "geodrift/solver/detail/block_kernels.hpp"
 #include "support/numeric_jacobian.hpp"
 
 using namespace geodrift;
@@ -130,6 +134,18 @@ TEST_CASE("Block Cholesky: chain ordering keeps the band, AMD limits fill on a r
   const double off_blocks = 94 * 6 + 15;  // off-diagonal blocks of the band = those of H
   CHECK(bc.factor_nnz() == Approx(off_blocks * 49 + 100.0 * 28).epsilon(1e-15));
   CHECK(BlockCholeskySolver::thin_factor(m.s, 7.0));
+  // kBest keeps the fill-free natural order (no AMD run).
+  for (int q = 0; q < 100; ++q) CHECK(bc.permutation()[static_cast<std::size_t>(q)] == q);
+  // The same chain with its blocks interleaved (2k, 2k+1 swapped halves): the natural order
+  // fills, and kBest finds an order with fewer flops.
+  std::vector<std::pair<int, int>> shuffled;
+  const auto pos = [](int i) { return i % 2 == 0 ? i / 2 : 50 + i / 2; };
+  for (const auto& [a, b] : chain(100, 6)) shuffled.emplace_back(pos(a), pos(b));
+  RandomSpd sh(100, 7, shuffled, 3);
+  BlockCholeskySolver sh_nat(BlockCholeskySolver::Ordering::kNatural), sh_best;
+  REQUIRE(sh_nat.analyze(sh.s) == LinearSolverStatus::kSuccess);
+  REQUIRE(sh_best.analyze(sh.s) == LinearSolverStatus::kSuccess);
+  CHECK(sh_best.flops() < 0.5 * sh_nat.flops());
   // A dense-ish random graph is not thin.
   RandomSpd r(60, 6, random_graph(60, 400, 9), 2);
   CHECK_FALSE(BlockCholeskySolver::thin_factor(r.s, 16.0));
@@ -174,4 +190,73 @@ TEST_CASE("Block Cholesky rejects structures it cannot factor", "[solver][block_
   solver::BlockStructure threes;
   threes.build({3, 3}, {{0, 1}});
   CHECK(BlockCholeskySolver::supported_block_size(threes) == 0);
+}
+
+namespace {
+
+template <int B>
+void check_block_kernels(std::mt19937* rng) {
+  using Mat = Eigen::Matrix<double, B, B>;
+  std::normal_distribution<double> n(0.0, 1.0);
+  const auto rnd = [&] {
+    Mat M;
+    for (int i = 0; i < B * B; ++i) M.data()[i] = n(*rng);
+    return M;
+  };
+  // Cholesky + inverse of a random SPD block against Eigen's LLT.
+  const Mat J = rnd();
+  const Mat D = J.transpose() * J + 0.1 * Mat::Identity();
+  Mat L = D, Li;
+  L.template triangularView<Eigen::StrictlyUpper>().setConstant(7.0);  // never read
+  REQUIRE(solver::detail::cholesky_inverse<B>(L.data(), Li.data()));
+  const Mat L_ref = D.llt().matrixL();
+  CHECK((L - L_ref).norm() <= 1e-13 * L_ref.norm());
+  CHECK((L * Li - Mat::Identity()).norm() <= 1e-12);
+  Mat bad = D;
+  bad(B - 1, B - 1) = -1.0;
+  CHECK_FALSE(solver::detail::cholesky_inverse<B>(bad.data(), Li.data()));
+  bad = D;
+  bad(B - 1, 0) = std::numeric_limits<double>::quiet_NaN();
+  CHECK_FALSE(solver::detail::cholesky_inverse<B>(bad.data(), Li.data()));
+  bad = D;
+  bad(2, 2) = std::numeric_limits<double>::infinity();
+  CHECK_FALSE(solver::detail::cholesky_inverse<B>(bad.data(), Li.data()));
+
+  // update(): C_slot(q) -= L_q·L_pᵀ over a column of 4 blocks landing in slots 4..7 (reversed);
+  // scale(): L_q <- L_q·Mᵀ. Both kernels against the Eigen expressions.
+  std::vector<Mat, Eigen::aligned_allocator<Mat>> blocks(8);
+  for (Mat& m : blocks) m = rnd();
+  const Mat M = rnd();
+  const std::vector<int> row = {3, 2, 1, 0};
+  const std::vector<int> slot_of_row = {7, 6, 5, 4};
+  std::vector<Mat, Eigen::aligned_allocator<Mat>> ref = blocks;
+  for (int q = 0; q < 4; ++q) ref[4 + q] -= blocks[q] * blocks[0].transpose();
+  for (int q = 1; q < 4; ++q) ref[q] = ref[q] * M.transpose();
+  const auto run = [&](auto kernels) {
+    auto b = blocks;
+    double* base = b.data()->data();
+    decltype(kernels)::update(base, 0, 4, row.data(), slot_of_row.data());
+    decltype(kernels)::scale(base, 1, 4, M.data());
+    double err = 0.0;
+    for (int q = 0; q < 8; ++q) err = std::max(err, (b[q] - ref[q]).norm() / ref[q].norm());
+    return err;
+  };
+  CHECK(run(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
+#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+    CHECK(run(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
+  else
+    WARN("no AVX2/FMA on this CPU: the AVX2 block kernels are not exercised");
+#endif
+}
+
+}  // namespace
+
+TEST_CASE("Block kernels: Cholesky inverse, Eigen and AVX2 products agree",
+          "[solver][block_cholesky]") {
+  std::mt19937 rng(11);
+  for (int rep = 0; rep < 20; ++rep) {
+    check_block_kernels<6>(&rng);
+    check_block_kernels<7>(&rng);
+  }
 }

@@ -8,24 +8,26 @@
 /// Why. On chain-shaped graphs (odometry + a few neighbours, the monocular-drift Sim(3) graph)
 /// the factor has no fill beyond a narrow block band and CHOLMOD's supernodes are tiny, so its
 /// per-supernode bookkeeping and BLAS calls on 7×7…42×42 panels dominate (≈ 1 GFlop/s). Here
-/// every operation is a B×B product with compile-time sizes (Eigen fixed-size kernels, no BLAS
-/// call, no index arithmetic inside a block).
+/// every operation is a B×B product with compile-time sizes (detail/block_kernels.hpp: Eigen
+/// fixed-size kernels, or AVX2 + FMA ones chosen at run time; no BLAS call, no index arithmetic
+/// inside a block).
 ///
 /// Algorithm (works on any block pattern, not only bands).
-///  - analyze(): ordering of the block graph = the better (fewer factorisation flops) of the
-///    natural order and AMD (Eigen's AMDOrdering on the block pattern); block elimination tree
+///  - analyze(): ordering of the block graph = the natural order if it has no fill, else the
+///    better (fewer factorisation flops) of the natural order and AMD (Eigen's AMDOrdering on
+///    the block pattern); block elimination tree
 ///    and column structures of L by the usual symbolic Cholesky (struct(L_j) = adj⁺(j) ∪
 ///    ⋃_{children c} struct(L_c) \ {c}); for every stored block of H its slot in L (and whether
 ///    it lands transposed). Runs once per pattern.
 ///  - factorize(): left-looking block Cholesky (column j gathers L_ij −= L_ik·L_jkᵀ from the
 ///    columns k whose next row is j, linked lists as in CSparse's cs_chol, T. Davis, "Direct
 ///    Methods for Sparse Linear Systems", SIAM 2006, ch. 4), then L_jj = chol(H_jj − …) and
-///    L_ij ← L_ij·L_jj⁻ᵀ with the explicit inverse of the B×B triangle, kept for the solves.
+///    L_ij ← L_ij·L_jj⁻ᵀ with the explicit inverse of the B×B triangle (cholesky_inverse()),
+///    kept for the solves.
 ///    A diagonal block that is not positive definite (or not finite) returns
 ///    kNotPositiveDefinite (LM rejects the step), never throws. No allocation.
 ///  - solve(): block forward / backward substitution with the stored inverses.
 
-#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCore>
@@ -36,6 +38,7 @@
 #include <string>
 #include <vector>
 
+#include "geodrift/solver/detail/block_kernels.hpp"
 #include "geodrift/solver/linear_solver.hpp"
 
 namespace geodrift::solver {
@@ -67,9 +70,10 @@ struct BlockSymbolic {
   double flops = 0.0;           ///< factorisation flops (B×B GEMM = 2B³)
 
   /// L's column structure for ordering `perm` of the block graph given as symmetric lower
-  /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry.
+  /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry, and in
+  /// *fill (if given) the number of blocks of L that are not blocks of H.
   static double build(const BlockStructure& s, const std::vector<int>& perm, int B,
-                      BlockSymbolic* out) {
+                      BlockSymbolic* out, long* fill = nullptr) {
     const int nb = s.num_blocks();
     std::vector<int> inv(nb);
     for (int q = 0; q < nb; ++q) inv[perm[q]] = q;
@@ -93,6 +97,7 @@ struct BlockSymbolic {
     rows.reserve(static_cast<std::size_t>(cnt[nb] + nb) * 2);
     std::vector<int> mark(nb, -1), child_head(nb, -1), child_next(nb, -1);
     double cost = 0.0, flops = 0.0;
+    long fill_blocks = 0;
     const double gemm = 2.0 * B * B * B;
     for (int j = 0; j < nb; ++j) {
       const std::size_t start = rows.size();
@@ -109,6 +114,7 @@ struct BlockSymbolic {
           if (i != j && mark[i] != j) {
             mark[i] = j;
             rows.push_back(i);
+            ++fill_blocks;
           }
         }
       std::sort(rows.begin() + static_cast<std::ptrdiff_t>(start) + 1, rows.end());
@@ -122,6 +128,7 @@ struct BlockSymbolic {
         child_head[parent] = j;
       }
     }
+    if (fill) *fill = fill_blocks;
     if (!out) return cost;
     out->nb = nb;
     out->perm = perm;
@@ -193,10 +200,40 @@ class BlockFactor final : public BlockFactorBase {
   }
 
   int factorize(const BlockStructure& s, const double* values) override {
+#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+    if (block_kernels_avx2()) return factorize_with<BlockKernelsAvx2<B>>(s, values);
+#endif
+    return factorize_with<BlockKernelsEigen<B>>(s, values);
+  }
+
+  void solve(const double* b, double* x) override {
     const BlockSymbolic& S = *sym_;
     const int nb = S.nb;
     const int* cp = S.col_ptr.data();
     const int* rw = S.row.data();
+    for (int j = 0; j < nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * S.perm[j]);
+    for (int j = 0; j < nb; ++j) {
+      const Vec yj = Linv_[j] * y_[j];
+      y_[j] = yj;
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) y_[rw[p]].noalias() -= L_[p] * yj;
+    }
+    for (int j = nb - 1; j >= 0; --j) {
+      Vec t = y_[j];
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) t.noalias() -= L_[p].transpose() * y_[rw[p]];
+      y_[j].noalias() = Linv_[j].transpose() * t;
+    }
+    for (int j = 0; j < nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
+  }
+
+ private:
+  template <class Kernels>
+  int factorize_with(const BlockStructure& s, const double* values) {
+    const BlockSymbolic& S = *sym_;
+    const int nb = S.nb;
+    const int* cp = S.col_ptr.data();
+    const int* rw = S.row.data();
+    static_assert(sizeof(Mat) == sizeof(double) * B * B, "L_ is B×B blocks back to back");
+    double* L = L_.data()->data();
     // One pass over L: column j is zeroed and loaded from H just before its updates (it is
     // still in cache when the updates and the diagonal solve touch it).
     const auto& boff = s.block_offsets();
@@ -223,8 +260,7 @@ class BlockFactor final : public BlockFactorBase {
       for (int k = head_[j]; k >= 0;) {
         const int nk = next_[k];
         const int p = ptr_[k];
-        const Mat LjkT = L_[p].transpose();
-        for (int q = p; q < cp[k + 1]; ++q) L_[slot_of_row_[rw[q]]].noalias() -= L_[q] * LjkT;
+        Kernels::update(L, p, cp[k + 1], rw, slot_of_row_.data());
         if (p + 1 < cp[k + 1]) {
           ptr_[k] = p + 1;
           const int i = rw[p + 1];
@@ -234,20 +270,9 @@ class BlockFactor final : public BlockFactorBase {
         k = nk;
       }
       // Diagonal block.
-      Mat& D = L_[cp[j]];
-      if (!D.allFinite()) return j + 1;
-      Eigen::LLT<Mat> llt(D);
-      if (llt.info() != Eigen::Success) return j + 1;
       Mat& Li = Linv_[j];
-      Li.setIdentity();
-      llt.matrixL().solveInPlace(Li);
-      if (!Li.allFinite()) return j + 1;
-      D = llt.matrixL();
-      const Mat LiT = Li.transpose();
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) {
-        const Mat t = L_[p] * LiT;
-        L_[p] = t;
-      }
+      if (!cholesky_inverse<B>(L_[cp[j]].data(), Li.data())) return j + 1;
+      Kernels::scale(L, cp[j] + 1, cp[j + 1], Li.data());
       if (cp[j] + 1 < cp[j + 1]) {
         ptr_[j] = cp[j] + 1;
         const int i = rw[cp[j] + 1];
@@ -258,26 +283,6 @@ class BlockFactor final : public BlockFactorBase {
     return 0;
   }
 
-  void solve(const double* b, double* x) override {
-    const BlockSymbolic& S = *sym_;
-    const int nb = S.nb;
-    const int* cp = S.col_ptr.data();
-    const int* rw = S.row.data();
-    for (int j = 0; j < nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * S.perm[j]);
-    for (int j = 0; j < nb; ++j) {
-      const Vec yj = Linv_[j] * y_[j];
-      y_[j] = yj;
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) y_[rw[p]].noalias() -= L_[p] * yj;
-    }
-    for (int j = nb - 1; j >= 0; --j) {
-      Vec t = y_[j];
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) t.noalias() -= L_[p].transpose() * y_[rw[p]];
-      y_[j].noalias() = Linv_[j].transpose() * t;
-    }
-    for (int j = 0; j < nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
-  }
-
- private:
   const BlockSymbolic* sym_ = nullptr;
   // Ordinary allocation: on the solver's own large-array mappings (huge pages or not) this
   // factorisation ran 25-30 % slower in the 10k drift solve (BENCHMARKS.md, round 6).
@@ -292,7 +297,7 @@ class BlockFactor final : public BlockFactorBase {
 class BlockCholeskySolver final : public LinearSolver {
  public:
   enum class Ordering {
-    kBest,     ///< natural or AMD, whichever needs fewer flops (default)
+    kBest,     ///< natural if it has no fill, else natural or AMD, whichever needs fewer flops
     kNatural,  ///< the problem's block order
     kAmd,      ///< AMD on the block pattern
   };
@@ -404,13 +409,15 @@ class BlockCholeskySolver final : public LinearSolver {
     std::vector<int> natural(nb);
     std::iota(natural.begin(), natural.end(), 0);
     if (ordering == Ordering::kNatural) return natural;
-    std::vector<int> amd = amd_order(s);
-    if (ordering == Ordering::kAmd) return amd;
+    if (ordering == Ordering::kAmd) return amd_order(s);
+    // kBest: a natural order without fill (a chain of keyframes linked to their next few, a
+    // band) is kept without running AMD, which minimises fill: there is none to remove.
     const int B = s.block_size(0);
-    return detail::BlockSymbolic::build(s, amd, B, nullptr) <
-                   detail::BlockSymbolic::build(s, natural, B, nullptr)
-               ? amd
-               : natural;
+    long fill = 0;
+    const double natural_cost = detail::BlockSymbolic::build(s, natural, B, nullptr, &fill);
+    if (fill == 0) return natural;
+    std::vector<int> amd = amd_order(s);
+    return detail::BlockSymbolic::build(s, amd, B, nullptr) < natural_cost ? amd : natural;
   }
 
   static std::vector<int> amd_order(const BlockStructure& s) {
