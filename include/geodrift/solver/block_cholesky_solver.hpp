@@ -15,10 +15,9 @@
 /// Algorithm (works on any block pattern, not only bands).
 ///  - analyze(): ordering of the block graph = the natural order if it has no fill, else the
 ///    better (fewer factorisation flops) of the natural order and AMD (Eigen's AMDOrdering on
-///    the block pattern); block elimination tree
-///    and column structures of L by the usual symbolic Cholesky (struct(L_j) = adj⁺(j) ∪
-///    ⋃_{children c} struct(L_c) \ {c}); for every stored block of H its slot in L (and whether
-///    it lands transposed). Runs once per pattern.
+///    the block pattern); block elimination tree and column structures of L by the usual
+///    symbolic Cholesky (struct(L_j) = adj⁺(j) ∪ ⋃_{children c} struct(L_c) \ {c}); for every
+///    stored block of H its slot in L (and whether it lands transposed). Runs once per pattern.
 ///  - factorize(): left-looking block Cholesky (column j gathers L_ij −= L_ik·L_jkᵀ from the
 ///    columns k whose next row is j, linked lists as in CSparse's cs_chol, T. Davis, "Direct
 ///    Methods for Sparse Linear Systems", SIAM 2006, ch. 4), then L_jj = chol(H_jj − …) and
