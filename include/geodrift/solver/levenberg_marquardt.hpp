@@ -107,14 +107,15 @@ struct Options {
   /// kAuto: the block Cholesky for thin 6/7-block pose graphs, CHOLMOD otherwise; BA wants
   /// kSchur (set it explicitly).
   LinearSolverType linear_solver = LinearSolverType::kAuto;
-  /// After an accepted step, evaluate the next trial point with Jacobians into a second copy of
-  /// H and g (its cost decides the step as usual): when the step is accepted again, which is
-  /// the common case, the separate cost-only evaluation is saved. The first trial (nothing is
-  /// known yet about how well λ0 fits the problem) and trials after a rejection are evaluated
-  /// cost-only. Same steps either way; costs one more H in memory. (On the 50k drift graph,
-  /// whose first trial at λ0 = 1e-8 is rejected, a cost-only first trial took the time to reach
-  /// Ceres' cost from 6.81 to 6.44 s CPU, medians of 6; on the 10k graph, whose first trial is
-  /// accepted, no change beyond noise: BENCHMARKS.md round 8.)
+  /// After an accepted step, evaluate the next trial point with Jacobians, into H (already
+  /// factorised and solved with) and a second g; its cost decides the step as usual. When the
+  /// step is accepted again, which is the common case, the separate cost-only evaluation is
+  /// saved; when it is rejected, x is linearised again (one linearisation more than without
+  /// speculation). The first trial (nothing is known yet about how well λ0 fits the problem) and
+  /// trials after a rejection are evaluated cost-only. Same steps either way. (On the 50k drift
+  /// graph, whose first trial at λ0 = 1e-8 is rejected, a cost-only first trial took the time to
+  /// reach Ceres' cost from 6.81 to 6.44 s CPU, medians of 6; on the 10k graph, whose first trial
+  /// is accepted, no change beyond noise: BENCHMARKS.md round 8.)
   bool speculative_linearization = true;
   /// Geodesic acceleration (M. K. Transtrum, J. P. Sethna, "Improvements to the
   /// Levenberg-Marquardt algorithm for nonlinear least-squares minimization", arXiv:1201.5885,
@@ -127,10 +128,10 @@ struct Options {
   /// iterations and KITTI 00 BA 41 instead of 32, the fallback neither). ρ uses v's quadratic
   /// model; a step that raises the cost is still never accepted. Costs per iteration one
   /// residual-only evaluation at x ⊞ h·v, two small products per block and one more solve; the
-  /// Jacobians of the current and the speculative point are kept during the solve (Problem::
-  /// reserve_acceleration: 2 × (49 + 8 + 7) doubles per Sim(3) edge, about the memory of H and
-  /// its speculative twin together on a pose graph). Pays off where the cost valley is curved
-  /// (large corrections along long chains, e.g. the Sim(3) drift graph: BENCHMARKS.md).
+  /// Jacobians of the current point are kept for it (Problem::reserve_acceleration: 49 + 8 + 7
+  /// doubles per Sim(3) edge, about the memory of H on a pose graph). Pays off where the cost
+  /// valley is curved (large corrections along long chains, e.g. the Sim(3) drift graph:
+  /// BENCHMARKS.md).
   bool geodesic_acceleration = false;
   double acceleration_step = 0.1;        ///< h of the finite difference (their choice 0.1)
   double max_acceleration_ratio = 0.75;  ///< α: largest accepted 2|a|/|v| (their 0.75)
@@ -421,21 +422,13 @@ class LevenbergMarquardt {
     // Buffers (sized once).
     H_.reset(&s);
     g_.resize(n);
-    if (options_.speculative_linearization) {
-      H2_.reset(&s);
-      g2_.resize(n);
-    } else {
-      H2_ = BlockSparseMatrix();
-      g2_.resize(0);
-    }
+    g2_.resize(options_.speculative_linearization ? n : 0);
     diag_.resize(n);
     damp_.resize(n);
     rhs_.resize(n);
     delta_.resize(n);
-    // Geodesic acceleration: the J̃ of the current point (slot `cur`) and of the speculative
-    // trial (the other slot) are kept by the problem.
+    // Geodesic acceleration: the problem keeps the J̃ of the point last linearised.
     const bool accel = options_.geodesic_acceleration;
-    int cur = accel ? 0 : -1;
     if (accel) {
       accel_.resize(n);
       problem->reserve_acceleration(true);
@@ -449,7 +442,7 @@ class LevenbergMarquardt {
       return finish(Termination::kJacobianCheckFailed, err.what);
     }
     double cost = 0.0;
-    bool ok = problem->linearize(&H_, g_.data(), &cost, &lt, &err, cur);
+    bool ok = problem->linearize(&H_, g_.data(), &cost, &lt, &err, accel);
     sum.time_evaluate += lt.evaluate;
     sum.time_assemble += lt.assemble;
     if (!ok) {
@@ -537,8 +530,8 @@ class LevenbergMarquardt {
       bool accelerated = false;  // delta_ = v + a/2 with a in accel_
       if (step_ok && accel) {
         const auto ta = Clock::now();
-        const bool aok = problem->acceleration_rhs(delta_.data(), options_.acceleration_step, cur,
-                                                   accel_.data());
+        const bool aok =
+            problem->acceleration_rhs(delta_.data(), options_.acceleration_step, accel_.data());
         sum.time_evaluate += std::chrono::duration<double>(Clock::now() - ta).count();
         if (aok) {  // otherwise (not evaluable at x ⊞ h·v) the plain step v is tried
           st = solve_neg(accel_, &accel_);
@@ -575,13 +568,14 @@ class LevenbergMarquardt {
         bool eval_ok;
         speculated = options_.speculative_linearization && speculate_next;
         if (speculated) {
-          // Linearise the trial point into the spare buffers: its cost decides the step, and
-          // if it is accepted H, g are ready (the buffers are swapped, no second evaluation).
+          // Linearise the trial point into H and the spare gradient: its cost decides the step,
+          // and if it is accepted H, g are ready (no second evaluation). H (factorised and
+          // solved with already) and the acceleration store of x are overwritten; a rejected
+          // trial linearises x again (below).
           problem->save_state();
           problem->plus(delta_.data());
           LinearizeTimes lt2;
-          eval_ok =
-              problem->linearize(&H2_, g2_.data(), &new_cost, &lt2, &err, accel ? 1 - cur : -1);
+          eval_ok = problem->linearize(&H_, g2_.data(), &new_cost, &lt2, &err, accel);
           sum.time_evaluate += lt2.evaluate;
           sum.time_assemble += lt2.assemble;
         } else {
@@ -607,7 +601,7 @@ class LevenbergMarquardt {
             if (bt_ok && std::isfinite(bt_cost) && bt_cost < cost) {
               new_cost = bt_cost;
               backtracked = true;
-              speculated = false;  // H2_, g2_ (if written) belong to the rejected full step
+              speculated = false;  // H, g2_ (if written) belong to the rejected full step
             } else {
               problem->restore_state();
             }
@@ -639,13 +633,11 @@ class LevenbergMarquardt {
                       "relative decrease " + num((old_cost - new_cost) / old_cost), finish);
         }
         if (speculated) {
-          std::swap(H_, H2_);
           g_.swap(g2_);
-          if (accel) cur = 1 - cur;
         } else {
           LinearizeTimes lt2;
           double c2 = 0.0;
-          ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err, cur);
+          ok = problem->linearize(&H_, g_.data(), &c2, &lt2, &err, accel);
           sum.time_evaluate += lt2.evaluate;
           sum.time_assemble += lt2.assemble;
           if (!ok)  // evaluated fine a moment ago: only a Jacobian-side failure can land here
@@ -666,6 +658,15 @@ class LevenbergMarquardt {
                           (step_ok ? std::string("no step decreases the cost")
                                    : std::string("last step: ") + solver_->message()),
                       finish);
+        }
+        if (speculated) {  // H and the acceleration store hold the rejected trial: x again
+          LinearizeTimes lt2;
+          double c2 = 0.0;
+          ok = problem->linearize(&H_, g2_.data(), &c2, &lt2, &err, accel);
+          sum.time_evaluate += lt2.evaluate;
+          sum.time_assemble += lt2.assemble;
+          if (!ok)  // linearised fine before: only a non-deterministic functor can land here
+            return done(sum, cost, lambda, Termination::kNonFiniteResidual, err.what, finish);
         }
       }
     }
@@ -713,7 +714,7 @@ class LevenbergMarquardt {
   std::unique_ptr<LinearSolver> solver_;
   bool analyzed_ = false;
   BlockStructure::Pattern pattern_;
-  BlockSparseMatrix H_, H2_;
+  BlockSparseMatrix H_;
   Eigen::VectorXd g_, g2_, diag_, damp_, rhs_, delta_, accel_;
 };
 

@@ -244,16 +244,16 @@ class ResidualContainerBase {
   /// central differences (step h, left retraction of each free parameter, states restored):
   /// returns the worst elementwise |J − J_num| / (1 + |J_num|), or +inf if unevaluable.
   virtual double jacobian_error(int k, double h) const = 0;
-  /// While ≥ 0, linearize() keeps every block's W·r and corrected J̃ in this slot (0 or 1),
-  /// which acceleration(…, slot) reads; the stores are sized by reserve_acceleration().
-  int store_slot = -1;
+  /// While true, linearize() keeps every block's W·r and corrected J̃, which acceleration()
+  /// reads; the stores are sized by reserve_acceleration().
+  bool store_acceleration = false;
   virtual void reserve_acceleration() = 0;
   virtual void release_acceleration() = 0;
   /// Geodesic acceleration over the blocks idx[0..count), called with the states at x ⊞ h·v:
-  /// rhs += J̃ᵀ·r̃''_v from each block's W·r there and the W·r, J̃ of x kept in `slot` by
-  /// linearize() (ResidualBlock::accumulate_acceleration).
-  virtual bool acceleration(const int* idx, int count, const double* v, double h, int slot,
-                            double* rhs, int* failed) const = 0;
+  /// rhs += J̃ᵀ·r̃''_v from each block's W·r there and the W·r, J̃ of x kept by linearize()
+  /// (ResidualBlock::accumulate_acceleration).
+  virtual bool acceleration(const int* idx, int count, const double* v, double h, double* rhs,
+                            int* failed) const = 0;
 };
 
 /// What the geodesic-acceleration store keeps of a block's J̃: the whole tuple, or for a
@@ -343,8 +343,8 @@ class ResidualContainer final : public ResidualContainerBase {
     for (int k = 0; k < count; ++k) {
       const Block& b = blocks[idx[k]];
       double ck;
-      // Geodesic acceleration: keep W·r and J̃ of this point (store_slot ≥ 0).
-      Residual* const e_out = store_slot >= 0 ? &stored_e_[store_slot][idx[k]] : nullptr;
+      // Geodesic acceleration: keep W·r and J̃ of this point.
+      Residual* const e_out = store_acceleration ? &stored_e_[idx[k]] : nullptr;
       if constexpr (Block::kHasLink) {
         if (b.linked()) {  // both parameters free: H_ij, H_jj, g_j from J̃_i and the link
           typename Block::LinkGroup link;
@@ -355,7 +355,7 @@ class ResidualContainer final : public ResidualContainerBase {
           }
           c += ck;
           b.accumulate_linked(r, std::get<0>(J), link, H, g);
-          if (e_out) stored_J_[store_slot][idx[k]] = {std::get<0>(J), link};
+          if (e_out) stored_J_[idx[k]] = {std::get<0>(J), link};
           continue;
         }
       }
@@ -366,9 +366,9 @@ class ResidualContainer final : public ResidualContainerBase {
       }
       if (e_out) {
         if constexpr (Block::kHasLink)  // at most one parameter free here: keep its J̃
-          stored_J_[store_slot][idx[k]].J = b.col_[0] >= 0 ? std::get<0>(J) : std::get<1>(J);
+          stored_J_[idx[k]].J = b.col_[0] >= 0 ? std::get<0>(J) : std::get<1>(J);
         else
-          stored_J_[store_slot][idx[k]] = J;
+          stored_J_[idx[k]] = J;
       }
       c += ck;
       b.accumulate(r, J, H, g);
@@ -378,7 +378,7 @@ class ResidualContainer final : public ResidualContainerBase {
     return ok;
   }
 
-  bool acceleration(const int* idx, int count, const double* v, double h, int slot, double* rhs,
+  bool acceleration(const int* idx, int count, const double* v, double h, double* rhs,
                     int* failed) const override {
     Residual e_h;
     [[maybe_unused]] Jacobians J;
@@ -386,9 +386,9 @@ class ResidualContainer final : public ResidualContainerBase {
       const std::size_t i = static_cast<std::size_t>(idx[k]);
       const Block& b = blocks[i];
       bool ok = b.weighted_residual(sqrt_infos.data(), &e_h);
-      const Residual& e = stored_e_[slot][i];
+      const Residual& e = stored_e_[i];
       if constexpr (Block::kHasLink) {  // J and G (see StoredJacobian)
-        const auto& st = stored_J_[slot][i];
+        const auto& st = stored_J_[i];
         if (ok && b.linked()) {  // both free: J̃_1 = −J̃_0·Ad(G) stays implicit
           ok = b.accumulate_acceleration_linked(e, st.J, st.G, e_h, v, h, rhs);
         } else if (ok) {  // one free: its J̃ into the tuple
@@ -399,7 +399,7 @@ class ResidualContainer final : public ResidualContainerBase {
           ok = b.accumulate_acceleration(e, J, e_h, v, h, rhs);
         }
       } else {
-        ok = ok && b.accumulate_acceleration(e, stored_J_[slot][i], e_h, v, h, rhs);
+        ok = ok && b.accumulate_acceleration(e, stored_J_[i], e_h, v, h, rhs);
       }
       if (!ok) {
         *failed = idx[k];
@@ -408,14 +408,14 @@ class ResidualContainer final : public ResidualContainerBase {
     }
     return true;
   }
-  /// Sizes the acceleration stores (2 slots of W·r and J̃).
+  /// Sizes the acceleration stores (W·r and J̃ per block).
   void reserve_acceleration() override {
-    for (auto& e : stored_e_) e.resize(blocks.size());
-    for (auto& j : stored_J_) j.resize(blocks.size());
+    stored_e_.resize(blocks.size());
+    stored_J_.resize(blocks.size());
   }
   void release_acceleration() override {
-    for (auto& e : stored_e_) std::remove_reference_t<decltype(e)>().swap(e);
-    for (auto& j : stored_J_) std::remove_reference_t<decltype(j)>().swap(j);
+    decltype(stored_e_)().swap(stored_e_);
+    decltype(stored_J_)().swap(stored_J_);
   }
 
   void mark_first_writes(const int* idx, int count, std::vector<bool>* written) override {
@@ -513,11 +513,11 @@ class ResidualContainer final : public ResidualContainerBase {
   }
 
  private:
-  /// Geodesic acceleration stores: W·r and J̃ per block for 2 linearisation points (the
-  /// current one and the speculative trial).
-  mutable std::vector<Residual, LargeArrayAllocator<Residual>> stored_e_[2];
+  /// Geodesic acceleration stores: W·r and J̃ per block at the last point linearised with
+  /// store_acceleration.
+  mutable std::vector<Residual, LargeArrayAllocator<Residual>> stored_e_;
   using Stored = typename StoredJacobian<Block>::type;
-  mutable std::vector<Stored, LargeArrayAllocator<Stored>> stored_J_[2];
+  mutable std::vector<Stored, LargeArrayAllocator<Stored>> stored_J_;
 
   template <std::size_t... I>
   static bool call_functor(const Block& b, Residual* r, Jacobians* jac, std::index_sequence<I...>) {
@@ -729,24 +729,23 @@ class Problem {
   /// structure()) and g = J̃ᵀr̃ (J̃, r̃: weighted, Triggs-corrected). H and g are overwritten.
   /// @param g num_effective_parameters() doubles.
   /// @param times accumulates the calling thread's evaluation and assembly time.
-  /// @param store_slot ≥ 0 (0 or 1, after reserve_acceleration()): also keep every block's
-  ///        W·r and J̃ in that slot for acceleration_rhs().
+  /// @param keep_acceleration (after reserve_acceleration(true)): also keep every block's W·r
+  ///        and J̃ for acceleration_rhs(), replacing those of the previous such call.
   bool linearize(BlockSparseMatrix* H, double* g, double* cost, LinearizeTimes* times,
-                 EvaluationError* error = nullptr, int store_slot = -1) const {
+                 EvaluationError* error = nullptr, bool keep_acceleration = false) const {
     GEODRIFT_CHECK(finalized_, "Problem::linearize() before finalize()");
-    GEODRIFT_CHECK(
-        store_slot < 0 || (store_slot < 2 && acceleration_reserved_),
-        "Problem::linearize(): store_slot " << store_slot << " without reserve_acceleration()");
-    struct SlotGuard {
+    GEODRIFT_CHECK(!keep_acceleration || acceleration_reserved_,
+                   "Problem::linearize(): keep_acceleration without reserve_acceleration(true)");
+    struct StoreGuard {
       const std::vector<std::unique_ptr<detail::ResidualContainerBase>>& cs;
-      SlotGuard(const std::vector<std::unique_ptr<detail::ResidualContainerBase>>& c, int slot)
+      StoreGuard(const std::vector<std::unique_ptr<detail::ResidualContainerBase>>& c, bool on)
           : cs(c) {
-        for (auto& x : cs) x->store_slot = slot;
+        for (auto& x : cs) x->store_acceleration = on;
       }
-      ~SlotGuard() {
-        for (auto& x : cs) x->store_slot = -1;
+      ~StoreGuard() {
+        for (auto& x : cs) x->store_acceleration = false;
       }
-    } guard(containers_, store_slot);
+    } guard(containers_, keep_acceleration);
     const auto tz = std::chrono::steady_clock::now();
     // No zeroing pass over H: every block's first writer assigns (mark_first_writes); only
     // blocks no residual writes are zeroed here.
@@ -834,9 +833,9 @@ class Problem {
   }
 
   /// Allocates (true) or frees (false) the geodesic-acceleration stores: per residual block
-  /// W·r and J̃ for two linearisation points (2·(m·n_J + m) doubles for m residual rows and
-  /// n_J Jacobian columns per block; a functor with a LinkGroup keeps J̃_0 and the link
-  /// instead, see StoredJacobian: 2 × (49 + 8 + 7) for a Sim(3) edge). Dropped by finalize().
+  /// W·r and J̃ of one linearisation point (m·n_J + m doubles for m residual rows and n_J
+  /// Jacobian columns per block; a functor with a LinkGroup keeps J̃_0 and the link instead,
+  /// see StoredJacobian: 49 + 8 + 7 for a Sim(3) edge). Dropped by finalize().
   void reserve_acceleration(bool on) {
     GEODRIFT_CHECK(finalized_, "Problem::reserve_acceleration() before finalize()");
     for (auto& c : containers_) {
@@ -849,14 +848,14 @@ class Problem {
   }
 
   /// Geodesic acceleration right-hand side rhs = J̃ᵀ·r̃''_v at the point last linearised with
-  /// store_slot = slot (the current states; see ResidualBlock::accumulate_acceleration). The
+  /// keep_acceleration (the current states; see ResidualBlock::accumulate_acceleration). The
   /// states are moved to x ⊞ h·v for one residual-only pass and restored (through the
   /// save_state() buffers; bit for bit). rhs: num_effective_parameters() doubles, overwritten. With
   /// 2 threads the blocks are split as in linearize(). @return false if a block cannot be evaluated
   /// at x ⊞ h·v or a value is not finite.
-  bool acceleration_rhs(const double* v, double h, int slot, double* rhs) {
-    GEODRIFT_CHECK(finalized_ && acceleration_reserved_ && slot >= 0 && slot < 2,
-                   "Problem::acceleration_rhs() needs reserve_acceleration(true) and slot 0/1");
+  bool acceleration_rhs(const double* v, double h, double* rhs) {
+    GEODRIFT_CHECK(finalized_ && acceleration_reserved_,
+                   "Problem::acceleration_rhs() needs reserve_acceleration(true)");
     const int n = structure_->num_cols();
     accel_step_.resize(static_cast<std::size_t>(n));
     for (int c = 0; c < n; ++c) accel_step_[static_cast<std::size_t>(c)] = h * v[c];
@@ -867,9 +866,9 @@ class Problem {
     plus(accel_step_.data());
     PartFailure fail;
     const bool ok = for_parts(
-        [v, h, slot](const detail::ResidualContainerBase& c, const std::vector<int>& l, double* out,
-                     int* failed) {
-          return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, slot, out, failed);
+        [v, h](const detail::ResidualContainerBase& c, const std::vector<int>& l, double* out,
+               int* failed) {
+          return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, out, failed);
         },
         rhs, two ? accel_buffer_.data() : nullptr, &fail);
     restore_state();
