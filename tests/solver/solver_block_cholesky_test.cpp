@@ -241,18 +241,49 @@ void check_block_kernels(std::mt19937* rng) {
     for (int q = 0; q < 8; ++q) err = std::max(err, (b[q] - ref[q]).norm() / ref[q].norm());
     return err;
   };
+  // The substitutions: y_row(q) -= L_q·x, t -= Σ L_qᵀ·y_row(q), M·x and Mᵀ·x, on 5 block rows
+  // with a block column of 3 (rows 4, 0, 2).
+  using Vec = Eigen::Matrix<double, B, 1>;
+  std::vector<Vec, Eigen::aligned_allocator<Vec>> y(5);
+  for (Vec& v : y) v = rnd().col(0);
+  const Vec xv = rnd().col(1), t0 = rnd().col(2);
+  const std::vector<int> srow = {4, 0, 2};
+  auto y_ref = y;
+  Vec t_ref = t0;
+  for (int q = 0; q < 3; ++q) {
+    y_ref[srow[q]] -= blocks[q] * xv;
+    t_ref -= blocks[q].transpose() * y[srow[q]];
+  }
+  const Vec mx_ref = M * xv, mtx_ref = M.transpose() * xv;
+  const auto subst = [&](auto kernels) {
+    using K = decltype(kernels);
+    auto yk = y;
+    Vec t = t0, mx, mtx;
+    K::lower_update(blocks.data()->data(), 0, 3, srow.data(), xv.data(), yk.data()->data());
+    K::transpose_update(blocks.data()->data(), 0, 3, srow.data(), y.data()->data(), t.data());
+    K::transpose_update(blocks.data()->data(), 3, 3, srow.data(), y.data()->data(), t.data());
+    K::template mat_vec<false>(M.data(), xv.data(), mx.data());
+    K::template mat_vec<true>(M.data(), xv.data(), mtx.data());
+    double err = std::max({(t - t_ref).norm() / t_ref.norm(), (mx - mx_ref).norm() / mx_ref.norm(),
+                           (mtx - mtx_ref).norm() / mtx_ref.norm()});
+    for (int r = 0; r < 5; ++r) err = std::max(err, (yk[r] - y_ref[r]).norm() / y_ref[r].norm());
+    return err;
+  };
   CHECK(run(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
+  CHECK(subst(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
 #ifdef GEODRIFT_BLOCK_KERNELS_AVX2
-  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     CHECK(run(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
-  else
+    CHECK(subst(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
+  } else {
     WARN("no AVX2/FMA on this CPU: the AVX2 block kernels are not exercised");
+  }
 #endif
 }
 
 }  // namespace
 
-TEST_CASE("Block kernels: Cholesky inverse, Eigen and AVX2 products agree",
+TEST_CASE("Block kernels: Cholesky inverse, Eigen and AVX2 products and substitutions agree",
           "[solver][block_cholesky]") {
   std::mt19937 rng(11);
   for (int rep = 0; rep < 20; ++rep) {

@@ -206,25 +206,37 @@ class BlockFactor final : public BlockFactorBase {
   }
 
   void solve(const double* b, double* x) override {
+#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+    if (block_kernels_avx2()) return solve_with<BlockKernelsAvx2<B>>(b, x);
+#endif
+    solve_with<BlockKernelsEigen<B>>(b, x);
+  }
+
+ private:
+  template <class Kernels>
+  void solve_with(const double* b, double* x) {
     const BlockSymbolic& S = *sym_;
     const int nb = S.nb;
     const int* cp = S.col_ptr.data();
     const int* rw = S.row.data();
+    static_assert(sizeof(Vec) == sizeof(double) * B, "y_ is B-vectors back to back");
+    const double* L = L_.data()->data();
+    double* y = y_.data()->data();
     for (int j = 0; j < nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * S.perm[j]);
-    for (int j = 0; j < nb; ++j) {
-      const Vec yj = Linv_[j] * y_[j];
-      y_[j] = yj;
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) y_[rw[p]].noalias() -= L_[p] * yj;
+    Vec t;
+    for (int j = 0; j < nb; ++j) {  // L·y = b
+      t = y_[j];
+      Kernels::template mat_vec<false>(Linv_[j].data(), t.data(), y + B * j);
+      Kernels::lower_update(L, cp[j] + 1, cp[j + 1], rw, y + B * j, y);
     }
-    for (int j = nb - 1; j >= 0; --j) {
-      Vec t = y_[j];
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p) t.noalias() -= L_[p].transpose() * y_[rw[p]];
-      y_[j].noalias() = Linv_[j].transpose() * t;
+    for (int j = nb - 1; j >= 0; --j) {  // Lᵀ·x = y
+      t = y_[j];
+      Kernels::transpose_update(L, cp[j] + 1, cp[j + 1], rw, y, t.data());
+      Kernels::template mat_vec<true>(Linv_[j].data(), t.data(), y + B * j);
     }
     for (int j = 0; j < nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
   }
 
- private:
   template <class Kernels>
   int factorize_with(const BlockStructure& s, const double* values) {
     const BlockSymbolic& S = *sym_;

@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 
@@ -93,6 +94,31 @@ struct BlockKernelsEigen {
       Map(L + q * B * B) = t;
     }
   }
+
+  // The substitutions of the solves; y and t hold B-vectors back to back (block row r at y + r·B).
+  using Vec = Eigen::Matrix<double, B, 1>;
+  /// y_row(q) −= L_q·x for q in [begin, end) (forward substitution; x is not one of those y).
+  static void lower_update(const double* L, int begin, int end, const int* row, const double* x,
+                           double* y) {
+    const Eigen::Map<const Vec> xv(x);
+    for (int q = begin; q < end; ++q)
+      Eigen::Map<Vec>(y + row[q] * B).noalias() -= ConstMap(L + q * B * B) * xv;
+  }
+  /// t −= Σ_q L_qᵀ·y_row(q) for q in [begin, end) (backward substitution).
+  static void transpose_update(const double* L, int begin, int end, const int* row, const double* y,
+                               double* t) {
+    Eigen::Map<Vec> tv(t);
+    for (int q = begin; q < end; ++q)
+      tv.noalias() -= ConstMap(L + q * B * B).transpose() * Eigen::Map<const Vec>(y + row[q] * B);
+  }
+  /// out = M·x (kTranspose: Mᵀ·x); out is not x.
+  template <bool kTranspose>
+  static void mat_vec(const double* M, const double* x, double* out) {
+    if constexpr (kTranspose)
+      Eigen::Map<Vec>(out).noalias() = ConstMap(M).transpose() * Eigen::Map<const Vec>(x);
+    else
+      Eigen::Map<Vec>(out).noalias() = ConstMap(M) * Eigen::Map<const Vec>(x);
+  }
 };
 
 #ifdef GEODRIFT_BLOCK_KERNELS_AVX2
@@ -152,6 +178,83 @@ struct BlockKernelsAvx2 {
         _mm256_storeu_pd(t + c * B + kHi, hi);
       }
       std::memcpy(A, t, sizeof(t));
+    }
+  }
+
+  /// Lanes of the second vector that repeat rows of the first (0 there, all ones elsewhere): a
+  /// dot product over both vectors counts every row once with the second one masked by it.
+  __attribute__((target("avx2,fma"), always_inline)) static inline __m256d hi_mask() {
+    alignas(32) static constexpr std::int64_t m[4] = {kHi >= 4 ? -1 : 0, kHi + 1 >= 4 ? -1 : 0,
+                                                      kHi + 2 >= 4 ? -1 : 0, kHi + 3 >= 4 ? -1 : 0};
+    return _mm256_load_pd(reinterpret_cast<const double*>(m));
+  }
+  __attribute__((target("avx2,fma"), always_inline)) static inline double hsum(__m256d a) {
+    __m128d s = _mm_add_pd(_mm256_castpd256_pd128(a), _mm256_extractf128_pd(a, 1));
+    return _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)));
+  }
+
+  __attribute__((target("avx2,fma"))) static void lower_update(const double* L, int begin, int end,
+                                                               const int* row, const double* x,
+                                                               double* y) {
+    __m256d xb[B];
+#pragma GCC unroll 8
+    for (int k = 0; k < B; ++k) xb[k] = _mm256_broadcast_sd(x + k);
+    for (int q = begin; q < end; ++q) {
+      const double* A = L + q * B * B;
+      double* yr = y + row[q] * B;
+      __m256d lo = _mm256_loadu_pd(yr), hi = _mm256_loadu_pd(yr + kHi);
+#pragma GCC unroll 8
+      for (int k = 0; k < B; ++k) {
+        lo = _mm256_fnmadd_pd(_mm256_loadu_pd(A + k * B), xb[k], lo);
+        hi = _mm256_fnmadd_pd(_mm256_loadu_pd(A + k * B + kHi), xb[k], hi);
+      }
+      _mm256_storeu_pd(yr + kHi, hi);  // the shared rows hold the same values in both
+      _mm256_storeu_pd(yr, lo);
+    }
+  }
+
+  __attribute__((target("avx2,fma"))) static void transpose_update(const double* L, int begin,
+                                                                   int end, const int* row,
+                                                                   const double* y, double* t) {
+    if (begin >= end) return;
+    const __m256d mask = hi_mask();
+    __m256d acc[B];
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) acc[c] = _mm256_setzero_pd();
+    for (int q = begin; q < end; ++q) {
+      const double* A = L + q * B * B;
+      const double* yr = y + row[q] * B;
+      const __m256d lo = _mm256_loadu_pd(yr), hi = _mm256_and_pd(_mm256_loadu_pd(yr + kHi), mask);
+#pragma GCC unroll 8
+      for (int c = 0; c < B; ++c) {
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * B), lo, acc[c]);
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * B + kHi), hi, acc[c]);
+      }
+    }
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
+  }
+
+  template <bool kTranspose>
+  __attribute__((target("avx2,fma"))) static void mat_vec(const double* M, const double* x,
+                                                          double* out) {
+    if constexpr (kTranspose) {
+      const __m256d lo = _mm256_loadu_pd(x),
+                    hi = _mm256_and_pd(_mm256_loadu_pd(x + kHi), hi_mask());
+#pragma GCC unroll 8
+      for (int c = 0; c < B; ++c)
+        out[c] = hsum(_mm256_fmadd_pd(_mm256_loadu_pd(M + c * B + kHi), hi,
+                                      _mm256_mul_pd(_mm256_loadu_pd(M + c * B), lo)));
+    } else {
+      __m256d lo = _mm256_setzero_pd(), hi = _mm256_setzero_pd();
+#pragma GCC unroll 8
+      for (int k = 0; k < B; ++k) {
+        const __m256d b = _mm256_broadcast_sd(x + k);
+        lo = _mm256_fmadd_pd(_mm256_loadu_pd(M + k * B), b, lo);
+        hi = _mm256_fmadd_pd(_mm256_loadu_pd(M + k * B + kHi), b, hi);
+      }
+      _mm256_storeu_pd(out + kHi, hi);
+      _mm256_storeu_pd(out, lo);
     }
   }
 };
