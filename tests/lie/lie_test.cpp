@@ -10,6 +10,7 @@
 #include <limits>
 #include <random>
 #include <sstream>
+#include <type_traits>
 #include <unsupported/Eigen/MatrixFunctions>
 
 #include "geodrift/error.hpp"
@@ -452,6 +453,18 @@ TEMPLATE_TEST_CASE(
     for (int i = 0; i < M.size(); ++i) M.data()[i] = n(rng);
     const typename G::Jacobian ref = M * X.adjoint();
     CHECK((X.times_adjoint(M) - ref).norm() <= 1e-13 * (1.0 + ref.norm()));
+#ifdef GEODRIFT_AVX2_KERNELS
+    if constexpr (std::is_same_v<G, Sim3d>) {
+      // The AVX2 kernel itself (times_adjoint uses it or not, by CPU and GEODRIFT_NO_AVX2).
+      if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
+        typename G::Jacobian out;
+        const Eigen::Matrix3d R = X.rotation().matrix();
+        lie::detail::sim3_times_adjoint_avx2(M.data(), R.data(), X.translation().data(), X.scale(),
+                                             out.data());
+        CHECK((out - ref).norm() <= 1e-13 * (1.0 + ref.norm()));
+      }
+    }
+#endif
     const typename G::Tangent u = M.col(0);
     const typename G::Tangent uref = X.adjoint().transpose() * u;
     CHECK((X.adjoint_transpose_times(u) - uref).norm() <= 1e-13 * (1.0 + uref.norm()));

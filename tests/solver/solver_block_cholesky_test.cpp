@@ -271,7 +271,7 @@ void check_block_kernels(std::mt19937* rng) {
   };
   CHECK(run(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
   CHECK(subst(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
-#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+#ifdef GEODRIFT_AVX2_KERNELS
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     CHECK(run(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
     CHECK(subst(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);

@@ -9,8 +9,10 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 #include <cmath>
+#include <type_traits>
 
 #include "geodrift/error.hpp"
+#include "geodrift/lie/detail/sim3_avx2.hpp"
 #include "geodrift/lie/detail/sim3_details.hpp"
 #include "geodrift/lie/detail/so3_details.hpp"
 #include "geodrift/lie/lie_group_base.hpp"
@@ -149,6 +151,15 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   /// (210 multiply-adds instead of 343; equals M * adjoint() to rounding).
   Jacobian times_adjoint(const Jacobian& M) const {
     const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+#ifdef GEODRIFT_AVX2_KERNELS
+    if constexpr (std::is_same_v<Scalar, double>) {
+      if (::geodrift::detail::avx2_fma_enabled()) {  // the same products, 4-wide with FMA
+        Jacobian out;
+        detail::sim3_times_adjoint_avx2(M.data(), R.data(), t_.data(), s_, out.data());
+        return out;
+      }
+    }
+#endif
     const auto Mw = M.template leftCols<3>();
     const auto Mn = M.template rightCols<3>();
     const Eigen::Matrix<Scalar, kDoF, 3> MnR = Mn * R;

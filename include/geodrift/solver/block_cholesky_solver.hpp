@@ -199,14 +199,14 @@ class BlockFactor final : public BlockFactorBase {
   }
 
   int factorize(const BlockStructure& s, const double* values) override {
-#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+#ifdef GEODRIFT_AVX2_KERNELS
     if (block_kernels_avx2()) return factorize_with<BlockKernelsAvx2<B>>(s, values);
 #endif
     return factorize_with<BlockKernelsEigen<B>>(s, values);
   }
 
   void solve(const double* b, double* x) override {
-#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+#ifdef GEODRIFT_AVX2_KERNELS
     if (block_kernels_avx2()) return solve_with<BlockKernelsAvx2<B>>(b, x);
 #endif
     solve_with<BlockKernelsEigen<B>>(b, x);

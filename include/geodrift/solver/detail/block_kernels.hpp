@@ -11,32 +11,20 @@
 /// column of C as two overlapping 4-wide vectors (rows 0..3 and B−4..B−1: the shared rows get
 /// the same operations in the same order, so the same values) with one FMA per element of B,
 /// the way BLAS libraries dispatch kernels. Results differ from the Eigen path only by the
-/// rounding of the fused operations. GEODRIFT_NO_AVX2=1 in the environment (read once) keeps
-/// the Eigen path, for A/B measurements.
+/// rounding of the fused operations. GEODRIFT_NO_AVX2=1 in the environment keeps the Eigen path
+/// (geodrift/detail/avx2.hpp).
 
 #include <Eigen/Core>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <cstring>
 
-#if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)
-#include <immintrin.h>
-#define GEODRIFT_BLOCK_KERNELS_AVX2 1
-#endif
+#include "geodrift/detail/avx2.hpp"
 
 namespace geodrift::solver::detail {
 
-/// Whether the AVX2 + FMA kernels are used (CPU support, GEODRIFT_NO_AVX2 unset).
-inline bool block_kernels_avx2() {
-#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
-  static const bool on = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
-                         std::getenv("GEODRIFT_NO_AVX2") == nullptr;
-  return on;
-#else
-  return false;
-#endif
-}
+/// Whether the AVX2 + FMA kernels are used (geodrift/detail/avx2.hpp).
+inline bool block_kernels_avx2() { return ::geodrift::detail::avx2_fma_enabled(); }
 
 /// Cholesky of the B×B column-major block D in place (its lower triangle is read; on return
 /// D = L with zeros above the diagonal) and Li = L⁻¹ (lower triangular). False when D is not
@@ -121,7 +109,7 @@ struct BlockKernelsEigen {
   }
 };
 
-#ifdef GEODRIFT_BLOCK_KERNELS_AVX2
+#ifdef GEODRIFT_AVX2_KERNELS
 /// The same with AVX2 + FMA (call only when block_kernels_avx2()).
 template <int B>
 struct BlockKernelsAvx2 {
