@@ -264,8 +264,14 @@ void check_block_kernels(std::mt19937* rng) {
     K::transpose_update(blocks.data()->data(), 3, 3, srow.data(), y.data()->data(), t.data());
     K::template mat_vec<false>(M.data(), xv.data(), mx.data());
     K::template mat_vec<true>(M.data(), xv.data(), mtx.data());
-    double err = std::max({(t - t_ref).norm() / t_ref.norm(), (mx - mx_ref).norm() / mx_ref.norm(),
-                           (mtx - mtx_ref).norm() / mtx_ref.norm()});
+    // load_transposed() of block 1 seen as the top of a column-major array with stride B + 3.
+    Eigen::Matrix<double, B + 3, B> tall = Eigen::Matrix<double, B + 3, B>::Constant(9.0);
+    tall.template topRows<B>() = blocks[1];
+    Mat tr;
+    K::load_transposed(tall.data(), B + 3, tr.data());
+    double err =
+        std::max({(t - t_ref).norm() / t_ref.norm(), (mx - mx_ref).norm() / mx_ref.norm(),
+                  (mtx - mtx_ref).norm() / mtx_ref.norm(), (tr - blocks[1].transpose()).norm()});
     for (int r = 0; r < 5; ++r) err = std::max(err, (yk[r] - y_ref[r]).norm() / y_ref[r].norm());
     return err;
   };

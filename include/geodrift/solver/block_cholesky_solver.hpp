@@ -263,7 +263,7 @@ class BlockFactor final : public BlockFactorBase {
         if (S.src_diag[k])
           dst = A.template selfadjointView<Eigen::Upper>();
         else if (S.src_tr[k])
-          dst = A.transpose();
+          Kernels::load_transposed(values + boff[k], S.src_stride[k], dst.data());
         else
           dst = A;
       }

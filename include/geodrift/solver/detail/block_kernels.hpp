@@ -83,6 +83,13 @@ struct BlockKernelsEigen {
     }
   }
 
+  /// dst = Aᵀ for a B×B block A of H (column-major with column stride `stride`).
+  static void load_transposed(const double* A, int stride, double* dst) {
+    Map out(dst);
+    out = Eigen::Map<const Mat, 0, Eigen::OuterStride<>>(A, B, B, Eigen::OuterStride<>(stride))
+              .transpose();
+  }
+
   // The substitutions of the solves; y and t hold B-vectors back to back (block row r at y + r·B).
   using Vec = Eigen::Matrix<double, B, 1>;
   /// y_row(q) −= L_q·x for q in [begin, end) (forward substitution; x is not one of those y).
@@ -166,6 +173,30 @@ struct BlockKernelsAvx2 {
         _mm256_storeu_pd(t + c * B + kHi, hi);
       }
       std::memcpy(A, t, sizeof(t));
+    }
+  }
+
+  /// dst = Aᵀ as four (overlapping) 4×4 transposes of rows/columns {0..3, B−4..B−1}: the
+  /// overlaps copy the same elements twice.
+  __attribute__((target("avx2,fma"))) static void load_transposed(const double* A, int stride,
+                                                                  double* dst) {
+    constexpr int kStart[2] = {0, kHi};
+#pragma GCC unroll 2
+    for (int rb = 0; rb < 2; ++rb) {
+#pragma GCC unroll 2
+      for (int cb = 0; cb < 2; ++cb) {
+        const int r0 = kStart[rb], c0 = kStart[cb];
+        const double* a = A + static_cast<std::ptrdiff_t>(c0) * stride + r0;
+        const __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + stride),
+                      a2 = _mm256_loadu_pd(a + 2 * stride), a3 = _mm256_loadu_pd(a + 3 * stride);
+        const __m256d t0 = _mm256_unpacklo_pd(a0, a1), t1 = _mm256_unpackhi_pd(a0, a1);
+        const __m256d t2 = _mm256_unpacklo_pd(a2, a3), t3 = _mm256_unpackhi_pd(a2, a3);
+        double* d = dst + r0 * B + c0;  // dst column r0 + i holds row r0 + i of A
+        _mm256_storeu_pd(d, _mm256_permute2f128_pd(t0, t2, 0x20));
+        _mm256_storeu_pd(d + B, _mm256_permute2f128_pd(t1, t3, 0x20));
+        _mm256_storeu_pd(d + 2 * B, _mm256_permute2f128_pd(t0, t2, 0x31));
+        _mm256_storeu_pd(d + 3 * B, _mm256_permute2f128_pd(t1, t3, 0x31));
+      }
     }
   }
 
