@@ -87,7 +87,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(theta, sigma, J_xi_S != nullptr);
     const Mat3 W = skew<Scalar>(omega);
     const Mat3 W2 = W * W;
-    const Mat3 Ci = v_matrix(W, W2, c).inverse();
+    const Mat3 Ci = v_matrix_inverse(W, W2, c, theta * theta);
     // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
     Tangent xi;
     xi.template segment<3>(kOmega) = omega;
@@ -219,7 +219,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   /// Exact inverse of left_jacobian(ξ) by block inversion of its lower-triangular form:
   ///   [ J⁻¹          0       0   ]
   ///   [ 0            1       0   ]
-  ///   [ −C⁻¹·A·J⁻¹   −C⁻¹·b  C⁻¹ ]    (J⁻¹ closed form; C⁻¹ exact 3x3 cofactor inverse).
+  ///   [ −C⁻¹·A·J⁻¹   −C⁻¹·b  C⁻¹ ]    (J⁻¹ and C⁻¹ in closed form, v_matrix_inverse()).
   static Jacobian left_jacobian_inverse(const Tangent& xi) {
     Jacobian Jli;
     blocks(xi, nullptr, &Jli);
@@ -265,6 +265,22 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   // C = c0·I + c1·W + c2·W² from W = [ω]x and W².
   static Mat3 v_matrix(const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c) {
     return c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2;
+  }
+  // C⁻¹ = a0·I + a1·W + a2·W²: polynomials in W are closed under inversion (W³ = −θ²·W), and
+  // matching the I, W, W² terms of C·C⁻¹ = I gives
+  //   a0 = 1/c0,  a1 = −c1/Δ,  a2 = (c1² − c2·d)/(c0·Δ),  d = c0 − θ²·c2,  Δ = d² + θ²·c1²
+  // (d ± iθ·c1 are C's eigenvalues on the plane ⟂ ω, so Δ > 0 whenever C is invertible).
+  // A handful of scalar operations instead of a 3×3 cofactor inverse.
+  static Mat3 v_matrix_inverse(const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c,
+                               Scalar theta2) {
+    const Scalar a0 = Scalar(1) / c.c0;
+    const Scalar d = c.c0 - theta2 * c.c2;
+    const Scalar inv_delta = Scalar(1) / (d * d + theta2 * c.c1 * c.c1);
+    const Scalar a1 = -c.c1 * inv_delta;
+    const Scalar a2 = (c.c1 * c.c1 - c.c2 * d) * a0 * inv_delta;
+    Mat3 Ci = a1 * W + a2 * W2;
+    Ci.diagonal().array() += a0;
+    return Ci;
   }
   static Mat3 v_matrix(const Point& omega, const detail::VCoeffs<Scalar>& c) {
     const Mat3 W = skew<Scalar>(omega);
@@ -320,7 +336,8 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
       const Mat3 W = skew<Scalar>(omega);
       const Mat3 W2 = W * W;
       const Mat3 C = v_matrix(W, W2, c);
-      inverse_blocks(omega, theta, nu, C * nu, W, W2, c, C.inverse(), Jli);
+      inverse_blocks(omega, theta, nu, C * nu, W, W2, c, v_matrix_inverse(W, W2, c, theta * theta),
+                     Jli);
     }
   }
 

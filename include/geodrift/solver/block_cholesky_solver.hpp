@@ -25,7 +25,8 @@
 ///    kept for the solves.
 ///    A diagonal block that is not positive definite (or not finite) returns
 ///    kNotPositiveDefinite (LM rejects the step), never throws. No allocation.
-///  - solve(): block forward / backward substitution with the stored inverses.
+///  - solve(): block forward / backward substitution with the stored inverses (the same
+///    kernels' y −= L_ij·x and t −= L_ijᵀ·y).
 
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>

@@ -1,8 +1,9 @@
 #pragma once
 
 /// @file
-/// B×B (B = 6, 7) column-major block products of the block Cholesky factorisation
-/// (block_cholesky_solver.hpp), with an AVX2 + FMA variant chosen at run time.
+/// B×B (B = 6, 7) column-major block products of the block Cholesky factorisation and of its
+/// substitutions (block_cholesky_solver.hpp: C −= A·Bᵀ, A ← A·Mᵀ, the transposed gather of
+/// H's blocks, y −= L·x, t −= Lᵀ·y), with an AVX2 + FMA variant chosen at run time.
 ///
 /// Why. Debian's compiler flags (and the library's users' usual ones) target baseline x86-64,
 /// where Eigen's fixed-size 7×7 products use 2-wide SSE2 packets without fused multiply-add;
