@@ -453,6 +453,10 @@ TEMPLATE_TEST_CASE(
     for (int i = 0; i < M.size(); ++i) M.data()[i] = n(rng);
     const typename G::Jacobian ref = M * X.adjoint();
     CHECK((X.times_adjoint(M) - ref).norm() <= 1e-13 * (1.0 + ref.norm()));
+    const G Y = G::exp(xi_small) * X;  // a nearby pose: X·Y⁻¹ close to the identity
+    const typename G::Matrix XYi = (X * Y.inverse()).matrix(), YXi = (Y * X.inverse()).matrix();
+    CHECK((X.times_inverse(Y).matrix() - XYi).norm() <= 1e-13 * (1.0 + X.matrix().norm()));
+    CHECK((Y.times_inverse(X).matrix() - YXi).norm() <= 1e-13 * (1.0 + X.matrix().norm()));
 #ifdef GEODRIFT_AVX2_KERNELS
     if constexpr (std::is_same_v<G, Sim3d>) {
       // The AVX2 kernel itself (times_adjoint uses it or not, by CPU and GEODRIFT_NO_AVX2).

@@ -78,6 +78,13 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
   /// Composition a·b = [R_a R_b, R_a t_b + t_a].
   SE3 operator*(const SE3& b) const { return SE3(R_ * b.R_, R_.act(b.t_) + t_, Raw{}); }
 
+  /// a·b⁻¹ = [R_a·R_bᵀ, t_a − (R_a·R_bᵀ)·t_b]: one rotation of a point instead of the two of
+  /// (*this) * b.inverse() (equal to rounding).
+  SE3 times_inverse(const SE3& b) const {
+    const SO3<Scalar> R = R_ * b.R_.inverse();
+    return SE3(R, t_ - R.act(b.t_), Raw{});
+  }
+
   /// Composition a·b with Jacobians w.r.t. left perturbations of a and b.
   /// @param J_ab_a (6x6, optional) = I.   @param J_ab_b (6x6, optional) = Ad(a).
   SE3 compose(const SE3& b, Jacobian* J_ab_a = nullptr, Jacobian* J_ab_b = nullptr) const {

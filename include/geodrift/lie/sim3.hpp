@@ -111,6 +111,14 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     return Sim3(R_ * b.R_, s_ * R_.act(b.t_) + t_, s_ * b.s_, Raw{});
   }
 
+  /// a·b⁻¹ = [R_a·R_bᵀ, t_a − s·(R_a·R_bᵀ)·t_b, s = s_a/s_b]: one rotation of a point instead
+  /// of the two of (*this) * b.inverse() (equal to rounding).
+  Sim3 times_inverse(const Sim3& b) const {
+    const SO3<Scalar> R = R_ * b.R_.inverse();
+    const Scalar s = s_ / b.s_;
+    return Sim3(R, t_ - s * R.act(b.t_), s, Raw{});
+  }
+
   /// Composition a·b with Jacobians w.r.t. left perturbations of a and b.
   /// @param J_ab_a (7x7, optional) = I.   @param J_ab_b (7x7, optional) = Ad(a).
   Sim3 compose(const Sim3& b, Jacobian* J_ab_a = nullptr, Jacobian* J_ab_b = nullptr) const {

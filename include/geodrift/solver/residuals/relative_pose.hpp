@@ -2,8 +2,8 @@
 
 /// @file
 /// Pose-graph residuals on a Lie group (SE3d or Sim3d; any group with log(J*), adjoint(),
-/// inverse(), operator*, times_adjoint()). All Jacobians are w.r.t. LEFT perturbations X ←
-/// exp(δ)·X, in the group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
+/// inverse(), operator*, times_inverse(), times_adjoint()). All Jacobians are w.r.t. LEFT
+/// perturbations X ← exp(δ)·X, in the group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
 
 #include <Eigen/Core>
 
@@ -36,7 +36,7 @@ struct RelativePoseResidual {
 
   bool operator()(const Group& S_i, const Group& S_j, Vec* r, Mat* J_r_Si = nullptr,
                   Mat* J_r_Sj = nullptr) const {
-    const Group E = dS_ij * (S_i * S_j.inverse());
+    const Group E = dS_ij * S_i.times_inverse(S_j);
     if (!J_r_Si && !J_r_Sj) {
       *r = E.log();
       return true;
@@ -50,7 +50,7 @@ struct RelativePoseResidual {
 
   /// r and J_r_Si as operator(), and the link G = S_i·S_j⁻¹ with J_r_Sj = −J_r_Si·Ad(G).
   bool linked(const Group& S_i, const Group& S_j, Vec* r, Mat* J_r_Si, Group* G) const {
-    *G = S_i * S_j.inverse();
+    *G = S_i.times_inverse(S_j);
     const Group E = dS_ij * (*G);
     Mat Jl_inv;
     *r = E.log(&Jl_inv);
@@ -69,7 +69,7 @@ struct PosePriorResidual {
   Group S_prior;
 
   bool operator()(const Group& S, Vec* r, Mat* J_r_S = nullptr) const {
-    const Group E = S * S_prior.inverse();
+    const Group E = S.times_inverse(S_prior);
     *r = E.log(J_r_S);
     return true;
   }
