@@ -117,6 +117,13 @@ TEST_CASE("Block Cholesky solves like dense LDLT and CHOLMOD on any pattern and 
         CHECK(test::near(x, ref, 1e-9));
         CHECK(test::near(x, xc, 1e-9));
         CHECK((D * x - b).norm() < 1e-9 * b.norm());
+        // The same substitutions folded into the factorisation: the same x.
+        Eigen::VectorXd xf = Eigen::VectorXd::Constant(D.rows(), 5.0);
+        REQUIRE(bc.factorize_and_solve(*m.H, b.data(), xf.data()) == LinearSolverStatus::kSuccess);
+        CHECK((xf - x).norm() <= 1e-14 * x.norm());
+        Eigen::VectorXd xs(D.rows());  // and solve() afterwards still uses that factor
+        REQUIRE(bc.solve(b.data(), xs.data()) == LinearSolverStatus::kSuccess);
+        CHECK((xs - x).norm() <= 1e-14 * x.norm());
       }
       CHECK(bc.factor_nnz() > 0.0);
       CHECK(bc.flops() > 0.0);
@@ -170,6 +177,11 @@ TEST_CASE("Block Cholesky: not positive definite or NaN is a status, and it reco
   CHECK_THAT(bc.message(), Catch::Contains("not positive definite"));
   v[pos] = std::numeric_limits<double>::quiet_NaN();
   CHECK(bc.factorize(*m.H) == LinearSolverStatus::kNotPositiveDefinite);
+  {
+    Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());
+    CHECK(bc.factorize_and_solve(*m.H, b.data(), x.data()) ==
+          LinearSolverStatus::kNotPositiveDefinite);
+  }
   v[pos] = keep;
   REQUIRE(bc.factorize(*m.H) == LinearSolverStatus::kSuccess);
   Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());

@@ -177,7 +177,10 @@ class BlockFactorBase {
   virtual ~BlockFactorBase() = default;
   virtual void setup(const BlockSymbolic* sym) = 0;
   /// 0 on success, else 1 + the (new-numbering) block column that is not positive definite.
-  virtual int factorize(const BlockStructure& s, const double* values) = 0;
+  /// With b (and x) non-null, also x = H⁻¹·b on success (forward substitution column by column
+  /// during the factorisation, then the backward one).
+  virtual int factorize(const BlockStructure& s, const double* values, const double* b = nullptr,
+                        double* x = nullptr) = 0;
   virtual void solve(const double* b, double* x) = 0;
 };
 
@@ -199,11 +202,12 @@ class BlockFactor final : public BlockFactorBase {
     ptr_.assign(static_cast<std::size_t>(sym->nb), -1);
   }
 
-  int factorize(const BlockStructure& s, const double* values) override {
+  int factorize(const BlockStructure& s, const double* values, const double* b = nullptr,
+                double* x = nullptr) override {
 #ifdef GEODRIFT_AVX2_KERNELS
-    if (block_kernels_avx2()) return factorize_with<BlockKernelsAvx2<B>>(s, values);
+    if (block_kernels_avx2()) return factorize_with<BlockKernelsAvx2<B>>(s, values, b, x);
 #endif
-    return factorize_with<BlockKernelsEigen<B>>(s, values);
+    return factorize_with<BlockKernelsEigen<B>>(s, values, b, x);
   }
 
   void solve(const double* b, double* x) override {
@@ -221,25 +225,41 @@ class BlockFactor final : public BlockFactorBase {
     const int* cp = S.col_ptr.data();
     const int* rw = S.row.data();
     static_assert(sizeof(Vec) == sizeof(double) * B, "y_ is B-vectors back to back");
+    load_rhs(b);
+    for (int j = 0; j < nb; ++j) forward_column<Kernels>(j, cp, rw);  // L·y = b
+    backward<Kernels>(x);
+  }
+
+  void load_rhs(const double* b) {
+    for (int j = 0; j < sym_->nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * sym_->perm[j]);
+  }
+  /// y_j ← L_jj⁻¹·y_j, then y_i −= L_ij·y_j below it.
+  template <class Kernels>
+  void forward_column(int j, const int* cp, const int* rw) {
+    double* y = y_.data()->data();
+    const Vec t = y_[j];
+    Kernels::template mat_vec<false>(Linv_[j].data(), t.data(), y + B * j);
+    Kernels::lower_update(L_.data()->data(), cp[j] + 1, cp[j + 1], rw, y + B * j, y);
+  }
+  /// Lᵀ·x = y, x permuted back.
+  template <class Kernels>
+  void backward(double* x) {
+    const BlockSymbolic& S = *sym_;
+    const int* cp = S.col_ptr.data();
+    const int* rw = S.row.data();
     const double* L = L_.data()->data();
     double* y = y_.data()->data();
-    for (int j = 0; j < nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * S.perm[j]);
     Vec t;
-    for (int j = 0; j < nb; ++j) {  // L·y = b
-      t = y_[j];
-      Kernels::template mat_vec<false>(Linv_[j].data(), t.data(), y + B * j);
-      Kernels::lower_update(L, cp[j] + 1, cp[j + 1], rw, y + B * j, y);
-    }
-    for (int j = nb - 1; j >= 0; --j) {  // Lᵀ·x = y
+    for (int j = S.nb - 1; j >= 0; --j) {
       t = y_[j];
       Kernels::transpose_update(L, cp[j] + 1, cp[j + 1], rw, y, t.data());
       Kernels::template mat_vec<true>(Linv_[j].data(), t.data(), y + B * j);
     }
-    for (int j = 0; j < nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
+    for (int j = 0; j < S.nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
   }
 
   template <class Kernels>
-  int factorize_with(const BlockStructure& s, const double* values) {
+  int factorize_with(const BlockStructure& s, const double* values, const double* b, double* x) {
     const BlockSymbolic& S = *sym_;
     const int nb = S.nb;
     const int* cp = S.col_ptr.data();
@@ -252,6 +272,7 @@ class BlockFactor final : public BlockFactorBase {
     const int* sp = S.src_ptr.data();
     const int* sl = S.src_list.data();
     std::fill(head_.begin(), head_.end(), -1);
+    if (b) load_rhs(b);
     for (int j = 0; j < nb; ++j) {
       for (int p = cp[j]; p < cp[j + 1]; ++p) {
         slot_of_row_[rw[p]] = p;
@@ -291,7 +312,9 @@ class BlockFactor final : public BlockFactorBase {
         next_[j] = head_[i];
         head_[i] = j;
       }
+      if (b) forward_column<Kernels>(j, cp, rw);  // column j of L is still in cache
     }
+    if (b) backward<Kernels>(x);
     return 0;
   }
 
@@ -354,28 +377,19 @@ class BlockCholeskySolver final : public LinearSolver {
   }
 
   LinearSolverStatus factorize(const BlockSparseMatrix& H) override {
-    message_.clear();
-    if (!factor_) {
-      message_ = "block Cholesky: factorize() before analyze()";
-      return LinearSolverStatus::kFatal;
-    }
-    if (H.rows() != n_) {
-      message_ = "block Cholesky: matrix size differs from the analysed one";
-      return LinearSolverStatus::kFatal;
-    }
-    const int bad = factor_->factorize(H.structure(), H.values());
-    if (bad != 0) {
-      message_ = "block Cholesky: matrix not positive definite (block " +
-                 std::to_string(sym_.perm[bad - 1]) + ")";
-      return LinearSolverStatus::kNotPositiveDefinite;
-    }
-    return LinearSolverStatus::kSuccess;
+    return factorize_impl(H, nullptr, nullptr);
   }
 
   LinearSolverStatus solve(const double* b, double* x) override {
     message_.clear();
     factor_->solve(b, x);
     return LinearSolverStatus::kSuccess;
+  }
+
+  /// factorize(H) with the forward substitution of b done column by column inside it.
+  LinearSolverStatus factorize_and_solve(const BlockSparseMatrix& H, const double* b,
+                                         double* x) override {
+    return factorize_impl(H, b, x);
   }
 
   std::string name() const override { return "block-cholesky"; }
@@ -394,6 +408,25 @@ class BlockCholeskySolver final : public LinearSolver {
   const std::vector<int>& permutation() const { return sym_.perm; }
 
  private:
+  LinearSolverStatus factorize_impl(const BlockSparseMatrix& H, const double* b, double* x) {
+    message_.clear();
+    if (!factor_) {
+      message_ = "block Cholesky: factorize() before analyze()";
+      return LinearSolverStatus::kFatal;
+    }
+    if (H.rows() != n_) {
+      message_ = "block Cholesky: matrix size differs from the analysed one";
+      return LinearSolverStatus::kFatal;
+    }
+    const int bad = factor_->factorize(H.structure(), H.values(), b, x);
+    if (bad != 0) {
+      message_ = "block Cholesky: matrix not positive definite (block " +
+                 std::to_string(sym_.perm[bad - 1]) + ")";
+      return LinearSolverStatus::kNotPositiveDefinite;
+    }
+    return LinearSolverStatus::kSuccess;
+  }
+
   /// The part of analyze_if_thin() that decides: B_, the ordering and the symbolic factor sym_
   /// (cleared when the factor is thicker than max_blocks_per_column); no numeric storage.
   bool symbolic_if_thin(const BlockStructure& s, double max_blocks_per_column) {

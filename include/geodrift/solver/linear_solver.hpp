@@ -42,6 +42,14 @@ class LinearSolver {
   virtual LinearSolverStatus factorize(const BlockSparseMatrix& H) = 0;
   /// x = H⁻¹·b with the last factorisation; b and x have H.rows() entries (may not alias).
   virtual LinearSolverStatus solve(const double* b, double* x) = 0;
+  /// factorize(H), then x = H⁻¹·b (x unspecified unless kSuccess). Solvers that can fold the
+  /// forward substitution into the factorisation, while each column of the factor is still in
+  /// cache, override it (BlockCholeskySolver: one pass over the factor less per iteration).
+  virtual LinearSolverStatus factorize_and_solve(const BlockSparseMatrix& H, const double* b,
+                                                 double* x) {
+    const LinearSolverStatus st = factorize(H);
+    return st == LinearSolverStatus::kSuccess ? solve(b, x) : st;
+  }
   /// Name for reports ("cholmod", "schur+cholmod", "dense").
   virtual std::string name() const = 0;
   /// Detail of the last non-success status (empty otherwise).
