@@ -21,12 +21,12 @@
 ///  - factorize(): left-looking block Cholesky (column j gathers L_ij −= L_ik·L_jkᵀ from the
 ///    columns k whose next row is j, linked lists as in CSparse's cs_chol, T. Davis, "Direct
 ///    Methods for Sparse Linear Systems", SIAM 2006, ch. 4), then L_jj = chol(H_jj − …) and
-///    L_ij ← L_ij·L_jj⁻ᵀ with the explicit inverse of the B×B triangle (cholesky_inverse()),
-///    kept for the solves.
+///    L_ij ← L_ij·L_jj⁻ᵀ with the explicit inverse of the B×B triangle (cholesky_inverse()).
 ///    A diagonal block that is not positive definite (or not finite) returns
 ///    kNotPositiveDefinite (LM rejects the step), never throws. No allocation.
-///  - solve(): block forward / backward substitution with the stored inverses (the same
-///    kernels' y −= L_ij·x and t −= L_ijᵀ·y).
+///  - solve(): block forward / backward substitution: y −= L_ij·x and t −= L_ijᵀ·y by the same
+///    kernels, the diagonal triangles by substitution (not the products with their inverses:
+///    detail::lower_solve). factorize_and_solve() does the forward half inside factorize().
 
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>
@@ -233,12 +233,11 @@ class BlockFactor final : public BlockFactorBase {
   void load_rhs(const double* b) {
     for (int j = 0; j < sym_->nb; ++j) y_[j] = Eigen::Map<const Vec>(b + B * sym_->perm[j]);
   }
-  /// y_j ← L_jj⁻¹·y_j, then y_i −= L_ij·y_j below it.
+  /// y_j ← L_jj⁻¹·y_j by substitution, then y_i −= L_ij·y_j below it.
   template <class Kernels>
   void forward_column(int j, const int* cp, const int* rw) {
     double* y = y_.data()->data();
-    const Vec t = y_[j];
-    Kernels::template mat_vec<false>(Linv_[j].data(), t.data(), y + B * j);
+    lower_solve<B>(L_[cp[j]].data(), Linv_[j].data(), y + B * j);
     Kernels::lower_update(L_.data()->data(), cp[j] + 1, cp[j + 1], rw, y + B * j, y);
   }
   /// Lᵀ·x = y, x permuted back.
@@ -253,7 +252,9 @@ class BlockFactor final : public BlockFactorBase {
     for (int j = S.nb - 1; j >= 0; --j) {
       t = y_[j];
       Kernels::transpose_update(L, cp[j] + 1, cp[j + 1], rw, y, t.data());
-      Kernels::template mat_vec<true>(Linv_[j].data(), t.data(), y + B * j);
+      lower_transpose_solve<B>(L + static_cast<std::size_t>(cp[j]) * B * B, Linv_[j].data(),
+                               t.data());
+      y_[j] = t;
     }
     for (int j = 0; j < S.nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
   }

@@ -3,7 +3,8 @@
 /// @file
 /// B×B (B = 6, 7) column-major block products of the block Cholesky factorisation and of its
 /// substitutions (block_cholesky_solver.hpp: C −= A·Bᵀ, A ← A·Mᵀ, the transposed gather of
-/// H's blocks, y −= L·x, t −= Lᵀ·y), with an AVX2 + FMA variant chosen at run time.
+/// H's blocks, y −= L·x, t −= Lᵀ·y), with an AVX2 + FMA variant chosen at run time, and the
+/// substitutions with the diagonal triangles.
 ///
 /// Why. Debian's compiler flags (and the library's users' usual ones) target baseline x86-64,
 /// where Eigen's fixed-size 7×7 products use 2-wide SSE2 packets without fused multiply-add;
@@ -63,6 +64,29 @@ inline bool cholesky_inverse(double* D, double* Li) {
   return true;
 }
 
+/// y ← L⁻¹·y (lower_solve) and y ← L⁻ᵀ·y (lower_transpose_solve) by substitution with the B×B
+/// lower triangle L of cholesky_inverse() and the diagonal of its Li (1/L_ii). The solves use
+/// these rather than the products with Li: substitution is backward stable, while the product
+/// with an explicit inverse loses accuracy with the block's condition number (on the
+/// ill-conditioned reduced camera system of a 3-camera BAL subset it stopped LM 10× further
+/// from the optimum by the gradient bound, solver_data tests).
+template <int B>
+inline void lower_solve(const double* L, const double* Li, double* y) {
+  for (int i = 0; i < B; ++i) {
+    double v = y[i];
+    for (int k = 0; k < i; ++k) v -= L[i + k * B] * y[k];
+    y[i] = v * Li[i + i * B];
+  }
+}
+template <int B>
+inline void lower_transpose_solve(const double* L, const double* Li, double* y) {
+  for (int i = B - 1; i >= 0; --i) {
+    double v = y[i];
+    for (int k = i + 1; k < B; ++k) v -= L[k + i * B] * y[k];
+    y[i] = v * Li[i + i * B];
+  }
+}
+
 /// Portable kernels (Eigen fixed size). L points at B×B column-major blocks stored back to back.
 template <int B>
 struct BlockKernelsEigen {
@@ -106,14 +130,6 @@ struct BlockKernelsEigen {
     Eigen::Map<Vec> tv(t);
     for (int q = begin; q < end; ++q)
       tv.noalias() -= ConstMap(L + q * B * B).transpose() * Eigen::Map<const Vec>(y + row[q] * B);
-  }
-  /// out = M·x (kTranspose: Mᵀ·x); out is not x.
-  template <bool kTranspose>
-  static void mat_vec(const double* M, const double* x, double* out) {
-    if constexpr (kTranspose)
-      Eigen::Map<Vec>(out).noalias() = ConstMap(M).transpose() * Eigen::Map<const Vec>(x);
-    else
-      Eigen::Map<Vec>(out).noalias() = ConstMap(M) * Eigen::Map<const Vec>(x);
   }
 };
 
@@ -253,29 +269,6 @@ struct BlockKernelsAvx2 {
     }
 #pragma GCC unroll 8
     for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
-  }
-
-  template <bool kTranspose>
-  __attribute__((target("avx2,fma"))) static void mat_vec(const double* M, const double* x,
-                                                          double* out) {
-    if constexpr (kTranspose) {
-      const __m256d lo = _mm256_loadu_pd(x),
-                    hi = _mm256_and_pd(_mm256_loadu_pd(x + kHi), hi_mask());
-#pragma GCC unroll 8
-      for (int c = 0; c < B; ++c)
-        out[c] = hsum(_mm256_fmadd_pd(_mm256_loadu_pd(M + c * B + kHi), hi,
-                                      _mm256_mul_pd(_mm256_loadu_pd(M + c * B), lo)));
-    } else {
-      __m256d lo = _mm256_setzero_pd(), hi = _mm256_setzero_pd();
-#pragma GCC unroll 8
-      for (int k = 0; k < B; ++k) {
-        const __m256d b = _mm256_broadcast_sd(x + k);
-        lo = _mm256_fmadd_pd(_mm256_loadu_pd(M + k * B), b, lo);
-        hi = _mm256_fmadd_pd(_mm256_loadu_pd(M + k * B + kHi), b, hi);
-      }
-      _mm256_storeu_pd(out + kHi, hi);
-      _mm256_storeu_pd(out, lo);
-    }
   }
 };
 #endif
