@@ -116,21 +116,29 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
 
   /// M·Ad(T) for any 6x6 M without forming Ad(T): with M = [M_ω M_ν] by column blocks,
   ///   M·Ad(T) = [ (M_ω + M_ν·[t]x)·R   M_ν·R ]   (equals M * adjoint() to rounding).
-  Jacobian times_adjoint(const Jacobian& M) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+  Jacobian times_adjoint(const Jacobian& M) const { return times_adjoint(M, R_.matrix()); }
+  /// times_adjoint(M) with R = rotation().matrix() from the caller (several products with one
+  /// T: the pose-graph accumulation converts the quaternion once).
+  Jacobian times_adjoint(const Jacobian& M, const Eigen::Matrix<Scalar, 3, 3>& R) const {
+    Jacobian out;
+    times_adjoint_into(M, R, &out);
+    return out;
+  }
+  /// *out = M·Ad(T) (out must not alias M), with R = rotation().matrix(): written in place.
+  void times_adjoint_into(const Jacobian& M, const Eigen::Matrix<Scalar, 3, 3>& R,
+                          Jacobian* out) const {
     Eigen::Matrix<Scalar, 3, 3> tR;
     for (int k = 0; k < 3; ++k) tR.col(k) = t_.cross(R.col(k));
-    Jacobian out;
-    out.template leftCols<3>().noalias() = M.template leftCols<3>() * R;
-    out.template leftCols<3>().noalias() += M.template rightCols<3>() * tR;
-    out.template rightCols<3>().noalias() = M.template rightCols<3>() * R;
-    return out;
+    out->template leftCols<3>().noalias() = M.template leftCols<3>() * R;
+    out->template leftCols<3>().noalias() += M.template rightCols<3>() * tR;
+    out->template rightCols<3>().noalias() = M.template rightCols<3>() * R;
   }
 
   /// Ad(T)·d for any d without forming Ad(T) (a tangent moved across T):
   ///   Ad(T)·d = [ R·d_ω ;  t × (R·d_ω) + R·d_ν ]   (equals adjoint() * d to rounding).
-  Tangent adjoint_times(const Tangent& d) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+  Tangent adjoint_times(const Tangent& d) const { return adjoint_times(d, R_.matrix()); }
+  /// adjoint_times(d) with R = rotation().matrix() from the caller.
+  Tangent adjoint_times(const Tangent& d, const Eigen::Matrix<Scalar, 3, 3>& R) const {
     const Point w = R * d.template segment<3>(kOmega);
     Tangent out;
     out.template segment<3>(kOmega) = w;
@@ -142,7 +150,10 @@ class SE3 : public LieGroupBase<SE3<Scalar>> {
   ///   Ad(T)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  Rᵀ·u_ν ]   (equals adjoint().transpose() * u to
   ///   rounding).
   Tangent adjoint_transpose_times(const Tangent& u) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    return adjoint_transpose_times(u, R_.matrix());
+  }
+  /// adjoint_transpose_times(u) with R = rotation().matrix() from the caller.
+  Tangent adjoint_transpose_times(const Tangent& u, const Eigen::Matrix<Scalar, 3, 3>& R) const {
     const Point un = u.template segment<3>(kNu);
     Tangent out;
     out.template segment<3>(kOmega).noalias() =

@@ -157,37 +157,46 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   /// with M = [M_ω M_σ M_ν] by column blocks,
   ///   M·Ad(S) = [ (M_ω + M_ν·[t]x)·R   M_σ − M_ν·t   s·M_ν·R ]
   /// (210 multiply-adds instead of 343; equals M * adjoint() to rounding).
-  Jacobian times_adjoint(const Jacobian& M) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+  Jacobian times_adjoint(const Jacobian& M) const { return times_adjoint(M, R_.matrix()); }
+  /// times_adjoint(M) with R = rotation().matrix() from the caller (several products with one
+  /// S: the pose-graph accumulation converts the quaternion once).
+  Jacobian times_adjoint(const Jacobian& M, const Eigen::Matrix<Scalar, 3, 3>& R) const {
+    Jacobian out;
+    times_adjoint_into(M, R, &out);
+    return out;
+  }
+  /// *out = M·Ad(S) (out must not alias M), with R = rotation().matrix(): written in place, no
+  /// copy of a returned 7×7 (a residual's Jacobian output; GCC copies 392-byte results with
+  /// `rep movsq`, which stalls behind the kernel's vector stores).
+  void times_adjoint_into(const Jacobian& M, const Eigen::Matrix<Scalar, 3, 3>& R,
+                          Jacobian* out) const {
 #ifdef GEODRIFT_AVX2_KERNELS
     if constexpr (std::is_same_v<Scalar, double>) {
       if (::geodrift::detail::avx2_fma_enabled()) {  // the same products, 4-wide with FMA
-        Jacobian out;
-        detail::sim3_times_adjoint_avx2(M.data(), R.data(), t_.data(), s_, out.data());
-        return out;
+        detail::sim3_times_adjoint_avx2(M.data(), R.data(), t_.data(), s_, out->data());
+        return;
       }
     }
 #endif
     const auto Mw = M.template leftCols<3>();
     const auto Mn = M.template rightCols<3>();
     const Eigen::Matrix<Scalar, kDoF, 3> MnR = Mn * R;
-    Jacobian out;
     // [t]x·R = t × (columns of R); M_ν·[t]x·R = M_ν·(t × R).
     Eigen::Matrix<Scalar, 3, 3> tR;
     for (int k = 0; k < 3; ++k) tR.col(k) = t_.cross(R.col(k));
-    out.template leftCols<3>().noalias() = Mw * R;
-    out.template leftCols<3>().noalias() += Mn * tR;
-    out.col(kSigma) = M.col(kSigma);
-    out.col(kSigma).noalias() -= Mn * t_;
-    out.template rightCols<3>() = s_ * MnR;
-    return out;
+    out->template leftCols<3>().noalias() = Mw * R;
+    out->template leftCols<3>().noalias() += Mn * tR;
+    out->col(kSigma) = M.col(kSigma);
+    out->col(kSigma).noalias() -= Mn * t_;
+    out->template rightCols<3>() = s_ * MnR;
   }
 
   /// Ad(S)·d for any d without forming Ad(S) (a tangent moved across S):
   ///   Ad(S)·d = [ R·d_ω ;  d_σ ;  t × (R·d_ω) − d_σ·t + s·R·d_ν ]   (equals adjoint() * d to
   ///   rounding).
-  Tangent adjoint_times(const Tangent& d) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+  Tangent adjoint_times(const Tangent& d) const { return adjoint_times(d, R_.matrix()); }
+  /// adjoint_times(d) with R = rotation().matrix() from the caller.
+  Tangent adjoint_times(const Tangent& d, const Eigen::Matrix<Scalar, 3, 3>& R) const {
     const Point w = R * d.template segment<3>(kOmega);
     Tangent out;
     out.template segment<3>(kOmega) = w;
@@ -201,7 +210,10 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   ///   Ad(S)ᵀ·u = [ Rᵀ·(u_ω − t × u_ν) ;  u_σ − t·u_ν ;  s·Rᵀ·u_ν ]
   /// (equals adjoint().transpose() * u to rounding).
   Tangent adjoint_transpose_times(const Tangent& u) const {
-    const Eigen::Matrix<Scalar, 3, 3> R = R_.matrix();
+    return adjoint_transpose_times(u, R_.matrix());
+  }
+  /// adjoint_transpose_times(u) with R = rotation().matrix() from the caller.
+  Tangent adjoint_transpose_times(const Tangent& u, const Eigen::Matrix<Scalar, 3, 3>& R) const {
     const Point un = u.template segment<3>(kNu);
     Tangent out;
     out.template segment<3>(kOmega).noalias() =

@@ -2,8 +2,9 @@
 
 /// @file
 /// Pose-graph residuals on a Lie group (SE3d or Sim3d; any group with log(J*), adjoint(),
-/// inverse(), operator*, times_inverse(), times_adjoint()). All Jacobians are w.r.t. LEFT
-/// perturbations X ← exp(δ)·X, in the group's tangent order (SE3: (ω, ν); Sim3: (ω, σ, ν)).
+/// inverse(), operator*, times_inverse(), times_adjoint(), times_adjoint_into()). All Jacobians are
+/// w.r.t. LEFT perturbations X ← exp(δ)·X, in the group's tangent order (SE3: (ω, ν); Sim3: (ω, σ,
+/// ν)).
 
 #include <Eigen/Core>
 
@@ -54,7 +55,7 @@ struct RelativePoseResidual {
     const Group E = dS_ij * (*G);
     Mat Jl_inv;
     *r = E.log(&Jl_inv);
-    *J_r_Si = dS_ij.times_adjoint(Jl_inv);
+    dS_ij.times_adjoint_into(Jl_inv, dS_ij.rotation().matrix(), J_r_Si);
     return true;
   }
 };
