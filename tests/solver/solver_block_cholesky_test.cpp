@@ -168,6 +168,11 @@ TEST_CASE("Block Cholesky: not positive definite or NaN is a status, and it reco
   RandomSpd m(20, 7, chain(20, 3), 4);
   BlockCholeskySolver bc;
   REQUIRE(bc.analyze(m.s) == LinearSolverStatus::kSuccess);
+  {  // L is not initialised before the first factorisation: solve() refuses
+    Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());
+    CHECK(bc.solve(b.data(), x.data()) == LinearSolverStatus::kFatal);
+    CHECK_THAT(bc.message(), Catch::Contains("without a successful factorize"));
+  }
   REQUIRE(bc.factorize(*m.H) == LinearSolverStatus::kSuccess);
   double* v = m.H->values();
   const int pos = m.s.diagonal_positions()[7 * 12 + 3];
@@ -181,6 +186,7 @@ TEST_CASE("Block Cholesky: not positive definite or NaN is a status, and it reco
     Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());
     CHECK(bc.factorize_and_solve(*m.H, b.data(), x.data()) ==
           LinearSolverStatus::kNotPositiveDefinite);
+    CHECK(bc.solve(b.data(), x.data()) == LinearSolverStatus::kFatal);  // after a failed one
   }
   v[pos] = keep;
   REQUIRE(bc.factorize(*m.H) == LinearSolverStatus::kSuccess);
@@ -296,6 +302,13 @@ void check_block_kernels(std::mt19937* rng) {
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     CHECK(run(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
     CHECK(subst(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
+    // gram(): JᵀJ of a residual block's Jacobian, symmetric to the bit.
+    const Mat J = blocks[2];
+    const Mat G_ref = J.transpose() * J;
+    Mat G;
+    solver::detail::BlockKernelsAvx2<B>::gram(J.data(), G.data());
+    CHECK((G - G_ref).norm() <= 1e-14 * G_ref.norm());
+    CHECK((G - G.transpose()).norm() == 0.0);
   } else {
     WARN("no AVX2/FMA on this CPU: the AVX2 block kernels are not exercised");
   }

@@ -347,15 +347,19 @@ class ResidualContainer final : public ResidualContainerBase {
       Residual* const e_out = store_acceleration ? &stored_e_[idx[k]] : nullptr;
       if constexpr (Block::kHasLink) {
         if (b.linked()) {  // both parameters free: H_ij, H_jj, g_j from J̃_i and the link
-          typename Block::LinkGroup link;
-          if (!b.evaluate_linked(sqrt_infos.data(), &ck, &r, &std::get<0>(J), &link, e_out)) {
+          // J̃_i and G are written straight into the acceleration store when it is kept (no
+          // copy of the 7×7 afterwards), else into locals.
+          typename Block::LinkGroup local_link;
+          auto* const st = e_out ? &stored_J_[idx[k]] : nullptr;
+          auto* const J0 = st ? &st->J : &std::get<0>(J);
+          auto* const link = st ? &st->G : &local_link;
+          if (!b.evaluate_linked(sqrt_infos.data(), &ck, &r, J0, link, e_out)) {
             *failed = idx[k];
             ok = false;
             break;
           }
           c += ck;
-          b.accumulate_linked(r, std::get<0>(J), link, H, g);
-          if (e_out) stored_J_[idx[k]] = {std::get<0>(J), link};
+          b.accumulate_linked(r, *J0, *link, H, g);
           continue;
         }
       }

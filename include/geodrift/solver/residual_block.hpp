@@ -28,8 +28,9 @@
 ///   bool linked(const lie::Sim3d& S_i, const lie::Sim3d& S_j, Eigen::Matrix<double, 7, 1>* r,
 ///               Eigen::Matrix<double, 7, 7>* J_r_Si, lie::Sim3d* G) const;  // G: J_r_Sj link
 /// @endcode
-/// The group provides times_adjoint(M) = M·Ad, adjoint_times(d) = Ad·d and
-/// adjoint_transpose_times(u) = Adᵀ·u (SE3d and Sim3d do).
+/// The group provides rotation().matrix() and times_adjoint(M, R) = M·Ad,
+/// adjoint_times(d, R) = Ad·d and adjoint_transpose_times(u, R) = Adᵀ·u with R that rotation
+/// matrix (SE3d and Sim3d do).
 /// When both parameters are free, ResidualBlock then evaluates only J̃_i (weight and Triggs
 /// correction act from the left, so J̃_j = −J̃_i·Ad(G) still holds) and accumulates
 ///   H_ii += J̃_iᵀJ̃_i,  H_ij −= H_ii'·Ad(G),  H_jj += Ad(G)ᵀ·H_ii'·Ad(G),  g_i += u,
@@ -49,6 +50,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "geodrift/solver/detail/block_kernels.hpp"
 #include "geodrift/solver/loss.hpp"
 #include "geodrift/solver/manifold.hpp"
 
@@ -104,10 +106,21 @@ inline void subtract_block(double* dst, int stride, const Mat& M, bool assign) {
 }
 /// JᵀJ of a fixed-size J from the dot products of its columns (upper triangle, mirrored):
 /// 28 dots instead of a 343-multiply 7×7 product for a pose-graph J̃ (57 -> 34 ns).
+/// Square 6×6 / 7×7 J use the AVX2 kernel where the CPU has it (block_kernels.hpp: 4-wide FMA
+/// columns of Jᵀ·J; equal to rounding).
 template <typename Mat>
 inline Eigen::Matrix<double, Mat::ColsAtCompileTime, Mat::ColsAtCompileTime> gram(const Mat& J) {
   constexpr int N = Mat::ColsAtCompileTime;
   Eigen::Matrix<double, N, N> M;
+#ifdef GEODRIFT_AVX2_KERNELS
+  if constexpr (std::is_same_v<typename Mat::Scalar, double> && Mat::RowsAtCompileTime == N &&
+                (N == 6 || N == 7)) {
+    if (block_kernels_avx2()) {
+      BlockKernelsAvx2<N>::gram(J.data(), M.data());
+      return M;
+    }
+  }
+#endif
   for (int c = 0; c < N; ++c) {
     for (int r = 0; r < c; ++r) M(r, c) = M(c, r) = J.col(r).dot(J.col(c));
     M(c, c) = J.col(c).squaredNorm();
@@ -299,13 +312,14 @@ class ResidualBlock {
     static_assert(kHasLink && std::is_same_v<G, LinkGroup>, "the functor declares no LinkGroup");
     using Vec = Eigen::Matrix<double, kDoF<0>, 1>;
     const Eigen::Map<const Vec> v0(v + col_[0]), v1(v + col_[1]);
+    const auto R = link.rotation().matrix();  // one conversion for both adjoint products
     Residual de = corrected_difference(e, e_h, h);
-    de.noalias() -= J0 * (v0 - link.adjoint_times(v1));
+    de.noalias() -= J0 * (v0 - link.adjoint_times(v1, R));
     const Residual dd = (2.0 / h) * de;
     if (!dd.allFinite()) return false;
     const Vec u = J0.transpose() * dd;
     Eigen::Map<Vec>(rhs + col_[0]) += u;
-    Eigen::Map<Vec>(rhs + col_[1]) -= link.adjoint_transpose_times(u);
+    Eigen::Map<Vec>(rhs + col_[1]) -= link.adjoint_transpose_times(u, R);
     return true;
   }
 
@@ -317,13 +331,14 @@ class ResidualBlock {
     static_assert(kDoF<1> == D && G::kDoF == D, "linked parameters must have the group's DoF");
     using Mat = Eigen::Matrix<double, D, D>;
     using Vec = Eigen::Matrix<double, D, 1>;
+    const auto R = link.rotation().matrix();  // one conversion for the three adjoint products
     const Vec u = J0.transpose() * r;
-    const Mat M = detail::gram(J0);         // H_ii contribution
-    const Mat N = link.times_adjoint(M);    // −H_ij = H_ii'·Ad(G)
-    const Mat Nt = N.transpose();           // Ad(G)ᵀ·H_ii'
-    const Mat Mj = link.times_adjoint(Nt);  // H_jj contribution Ad(G)ᵀ·H_ii'·Ad(G)
+    const Mat M = detail::gram(J0);            // H_ii contribution
+    const Mat N = link.times_adjoint(M, R);    // −H_ij = H_ii'·Ad(G)
+    const Mat Nt = N.transpose();              // Ad(G)ᵀ·H_ii'
+    const Mat Mj = link.times_adjoint(Nt, R);  // H_jj contribution Ad(G)ᵀ·H_ii'·Ad(G)
     Eigen::Map<Vec>(g + col_[0]) += u;
-    Eigen::Map<Vec>(g + col_[1]) -= link.adjoint_transpose_times(u);
+    Eigen::Map<Vec>(g + col_[1]) -= link.adjoint_transpose_times(u, R);
     constexpr int p00 = pair_index(0, 0), p01 = pair_index(0, 1), p11 = pair_index(1, 1);
     detail::add_block(H + off_[p00], stride_[p00], M, assign_[p00]);
     detail::add_block(H + off_[p11], stride_[p11], Mj, assign_[p11]);

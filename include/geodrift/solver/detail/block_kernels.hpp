@@ -4,7 +4,8 @@
 /// B×B (B = 6, 7) column-major block products of the block Cholesky factorisation and of its
 /// substitutions (block_cholesky_solver.hpp: C −= A·Bᵀ, A ← A·Mᵀ, the transposed gather of
 /// H's blocks, y −= L·x, t −= Lᵀ·y), with an AVX2 + FMA variant chosen at run time, and the
-/// substitutions with the diagonal triangles.
+/// substitutions with the diagonal triangles. BlockKernelsAvx2::gram also serves the residual
+/// blocks' J̃ᵀJ̃ (residual_block.hpp).
 ///
 /// Why. Debian's compiler flags (and the library's users' usual ones) target baseline x86-64,
 /// where Eigen's fixed-size 7×7 products use 2-wide SSE2 packets without fused multiply-add;
@@ -50,13 +51,15 @@ inline bool cholesky_inverse(double* D, double* Li) {
     }
     for (int i = 0; i < j; ++i) D[i + j * B] = 0.0;
   }
+  double inv_diag[B];  // 1/L_ii: the substitution multiplies (B(B−1)/2 divisions fewer)
+  for (int i = 0; i < B; ++i) inv_diag[i] = 1.0 / D[i + i * B];
   for (int c = 0; c < B; ++c) {
     for (int i = 0; i < c; ++i) Li[i + c * B] = 0.0;
-    Li[c + c * B] = 1.0 / D[c + c * B];
+    Li[c + c * B] = inv_diag[c];
     for (int i = c + 1; i < B; ++i) {
       double v = 0.0;
       for (int k = c; k < i; ++k) v -= D[i + k * B] * Li[k + c * B];
-      Li[i + c * B] = v / D[i + i * B];
+      Li[i + c * B] = v * inv_diag[i];
     }
   }
   for (int i = 0; i < B * B; ++i)
@@ -227,6 +230,21 @@ struct BlockKernelsAvx2 {
   __attribute__((target("avx2,fma"), always_inline)) static inline double hsum(__m256d a) {
     __m128d s = _mm_add_pd(_mm256_castpd256_pd128(a), _mm256_extractf128_pd(a, 1));
     return _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)));
+  }
+
+  /// M = JᵀJ (full, symmetric to the bit) for a B×B column-major J: with Jt = Jᵀ (one
+  /// load_transposed), column c of M is Σ_k Jt(:, k)·Jt(c, k), the update's column kernel. For
+  /// the residual blocks' H_ii = J̃ᵀJ̃ (residual_block.hpp, detail::gram).
+  __attribute__((target("avx2,fma"))) static void gram(const double* J, double* M) {
+    double Jt[B * B];
+    load_transposed(J, B, Jt);
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) {
+      __m256d lo = _mm256_setzero_pd(), hi = _mm256_setzero_pd();
+      column<false>(Jt, Jt, c, &lo, &hi);
+      _mm256_storeu_pd(M + c * B + kHi, hi);  // the shared rows hold the same values in both
+      _mm256_storeu_pd(M + c * B, lo);
+    }
   }
 
   __attribute__((target("avx2,fma"))) static void lower_update(const double* L, int begin, int end,
