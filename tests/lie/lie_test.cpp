@@ -433,6 +433,38 @@ TEST_CASE("Sim3 reduced theta series agree with the full series and the closed f
   CHECK(rel(three[6], ref[6]) > 1e-14);
 }
 
+TEST_CASE(
+    "W-polynomials from W^2 = w w^T - theta^2 I and the written-out 3x3 products equal "
+    "the matrix forms",
+    "[lie]") {
+  // Sim3::log and its Jl^-1 build k0 I + k1 W + k2 W^2 without W*W (w_polynomial) and multiply
+  // 3x3 matrices with mul3; both against Eigen's products, seeded, |ω| from 1e-8 to ≈ 5.
+  namespace detail = geodrift::lie::detail;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto rnd3 = [&] { return Eigen::Vector3d(u(rng), u(rng), u(rng)); };
+  for (int trial = 0; trial < 200; ++trial) {
+    const double scale = std::pow(10.0, -8.0 + 8.5 * (trial % 17) / 16.0);  // 1e-8 .. ≈ 3
+    const Eigen::Vector3d w = scale * rnd3();
+    const double k0 = u(rng), k1 = u(rng), k2 = u(rng);
+    const Eigen::Matrix3d W = detail::skew<double>(w);
+    const Eigen::Matrix3d ref = k0 * Eigen::Matrix3d::Identity() + k1 * W + k2 * (W * W);
+    const Eigen::Matrix3d P = detail::w_polynomial(k0, k1, k2, w, w.squaredNorm());
+    const Eigen::Vector3d v = rnd3();
+    const Eigen::Vector3d Pv = detail::w_polynomial_times(k0, k1, k2, w, w.squaredNorm(), v);
+    Eigen::Matrix3d A, B;
+    for (int k = 0; k < 9; ++k) {
+      A(k % 3, k / 3) = u(rng);
+      B(k % 3, k / 3) = u(rng);
+    }
+    INFO("trial " << trial << " |w| " << w.norm());
+    CHECK((P - ref).cwiseAbs().maxCoeff() <= 1e-15 * (1.0 + ref.cwiseAbs().maxCoeff()));
+    CHECK((Pv - ref * v).cwiseAbs().maxCoeff() <= 1e-15 * (1.0 + (ref * v).norm()));
+    CHECK((detail::mul3(A, B) - A * B).cwiseAbs().maxCoeff() <= 1e-15);
+    CHECK((detail::mul3(A, v) - A * v).cwiseAbs().maxCoeff() <= 1e-15);
+  }
+}
+
 TEMPLATE_TEST_CASE(
     "times_adjoint, adjoint_times and adjoint_transpose_times equal the products with the "
     "adjoint; log shares its coefficients with left_jacobian_inverse",

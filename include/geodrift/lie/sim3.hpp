@@ -71,7 +71,9 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     }
     const Point omega = xi.template segment<3>(kOmega);
     const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), xi[kSigma], false);
-    return Sim3(SO3<Scalar>::exp(omega), v_matrix(omega, c) * xi.template segment<3>(kNu),
+    return Sim3(SO3<Scalar>::exp(omega),
+                detail::w_polynomial_times(c.c0, c.c1, c.c2, omega, omega.squaredNorm(),
+                                           Point(xi.template segment<3>(kNu))),
                 exp(xi[kSigma]), Raw{});
   }
 
@@ -81,19 +83,19 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   ///        Jacobian (same values as left_jacobian_inverse(log S)).
   Tangent log(Jacobian* J_xi_S = nullptr) const {
     using std::log;
+    using std::sqrt;
     const Point omega = R_.log();
     const Scalar sigma = log(s_);
-    const Scalar theta = omega.norm();
+    const Scalar theta2 = omega.squaredNorm();
+    const Scalar theta = sqrt(theta2);
     const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(theta, sigma, J_xi_S != nullptr);
-    const Mat3 W = skew<Scalar>(omega);
-    const Mat3 W2 = W * W;
-    const Mat3 Ci = v_matrix_inverse(W, W2, c, theta * theta);
+    const InverseCoeffs a = v_inverse_coeffs(c, theta2);
     // Segment assignment: see SE3::log (GCC 12 false -Warray-bounds with float).
     Tangent xi;
     xi.template segment<3>(kOmega) = omega;
     xi[kSigma] = sigma;
-    xi.template segment<3>(kNu) = Ci * t_;
-    if (J_xi_S) inverse_blocks(omega, theta, xi.template segment<3>(kNu), t_, W, W2, c, Ci, J_xi_S);
+    xi.template segment<3>(kNu) = detail::w_polynomial_times(a.a0, a.a1, a.a2, omega, theta2, t_);
+    if (J_xi_S) inverse_blocks(omega, theta, theta2, xi.template segment<3>(kNu), t_, c, a, J_xi_S);
     return xi;
   }
 
@@ -239,7 +241,7 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   /// Exact inverse of left_jacobian(ξ) by block inversion of its lower-triangular form:
   ///   [ J⁻¹          0       0   ]
   ///   [ 0            1       0   ]
-  ///   [ −C⁻¹·A·J⁻¹   −C⁻¹·b  C⁻¹ ]    (J⁻¹ and C⁻¹ in closed form, v_matrix_inverse()).
+  ///   [ −C⁻¹·A·J⁻¹   −C⁻¹·b  C⁻¹ ]    (J⁻¹ and C⁻¹ in closed form, v_inverse_coeffs()).
   static Jacobian left_jacobian_inverse(const Tangent& xi) {
     Jacobian Jli;
     blocks(xi, nullptr, &Jli);
@@ -282,55 +284,67 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
   struct Raw {};  // internal: inputs known valid
   Sim3(const SO3<Scalar>& R, const Point& t, Scalar s, Raw) : R_(R), t_(t), s_(s) {}
 
-  // C = c0·I + c1·W + c2·W² from W = [ω]x and W².
-  static Mat3 v_matrix(const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c) {
-    return c.c0 * Mat3::Identity() + c.c1 * W + c.c2 * W2;
-  }
   // C⁻¹ = a0·I + a1·W + a2·W²: polynomials in W are closed under inversion (W³ = −θ²·W), and
   // matching the I, W, W² terms of C·C⁻¹ = I gives
   //   a0 = 1/c0,  a1 = −c1/Δ,  a2 = (c1² − c2·d)/(c0·Δ),  d = c0 − θ²·c2,  Δ = d² + θ²·c1²
   // (d ± iθ·c1 are C's eigenvalues on the plane ⟂ ω, so Δ > 0 whenever C is invertible).
   // A handful of scalar operations instead of a 3×3 cofactor inverse.
-  static Mat3 v_matrix_inverse(const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c,
-                               Scalar theta2) {
+  struct InverseCoeffs {
+    Scalar a0, a1, a2;
+  };
+  static InverseCoeffs v_inverse_coeffs(const detail::VCoeffs<Scalar>& c, Scalar theta2) {
     const Scalar a0 = Scalar(1) / c.c0;
     const Scalar d = c.c0 - theta2 * c.c2;
     const Scalar inv_delta = Scalar(1) / (d * d + theta2 * c.c1 * c.c1);
-    const Scalar a1 = -c.c1 * inv_delta;
-    const Scalar a2 = (c.c1 * c.c1 - c.c2 * d) * a0 * inv_delta;
-    Mat3 Ci = a1 * W + a2 * W2;
-    Ci.diagonal().array() += a0;
-    return Ci;
-  }
-  static Mat3 v_matrix(const Point& omega, const detail::VCoeffs<Scalar>& c) {
-    const Mat3 W = skew<Scalar>(omega);
-    return v_matrix(W, W * W, c);
+    return {a0, -c.c1 * inv_delta, (c.c1 * c.c1 - c.c2 * d) * a0 * inv_delta};
   }
 
-  // Jl⁻¹(ξ) for ξ = (ω, σ, ν), from what log() has anyway: θ = |ω|, t = C·ν, W = [ω]x, W², the
-  // coefficients c (with derivatives) and C⁻¹. Block inversion of left_jacobian()'s
-  // lower-triangular form, where the translation row A = D + [t]x·J (D = ∂(Cν)/∂ω, see
+  // Jl⁻¹(ξ) for ξ = (ω, σ, ν), from what log() has anyway: θ, θ², t = C·ν, the coefficients c
+  // (with derivatives) and those of C⁻¹. Block inversion of left_jacobian()'s lower-triangular
+  // form, where the translation row A = D + [t]x·J (D = ∂(Cν)/∂ω, see
   // detail::translation_rows) enters only as A·J⁻¹ = D·J⁻¹ + [t]x: neither J nor A is formed.
   // In D = (c1t·Wν + c2t·W²ν − 2c2·ν)ωᵀ − c1·[ν]x + c2·((ωᵀν)I + ωνᵀ) the rank-one part passes
-  // J⁻¹ unchanged (ωᵀW = 0, so ωᵀ·J⁻¹ = ωᵀ).
-  static void inverse_blocks(const Point& omega, Scalar theta, const Point& nu, const Point& t,
-                             const Mat3& W, const Mat3& W2, const detail::VCoeffs<Scalar>& c,
-                             const Mat3& Ci, Jacobian* Jli) {
-    const Mat3 Ji = Mat3::Identity() - Scalar(0.5) * W +
-                    detail::so3_left_jacobian_inverse_d2<Scalar>(theta) * W2;
-    const Point Wnu = W * nu;
-    const Point W2nu = W * Wnu;
-    Mat3 P = c.c2 * omega * nu.transpose() - c.c1 * skew<Scalar>(nu);
-    P.diagonal().array() += c.c2 * omega.dot(nu);
-    Mat3 AJi = skew<Scalar>(t);
-    AJi.noalias() += P * Ji;
-    AJi.noalias() += (c.c1t * Wnu + c.c2t * W2nu - Scalar(2) * c.c2 * nu) * omega.transpose();
+  // J⁻¹ unchanged (ωᵀW = 0, so ωᵀ·J⁻¹ = ωᵀ). Polynomials in W are formed from W² = ωωᵀ − θ²I
+  // and the two remaining 3×3 products are written out (detail::mul3).
+  static void inverse_blocks(const Point& omega, Scalar theta, Scalar theta2, const Point& nu,
+                             const Point& t, const detail::VCoeffs<Scalar>& c,
+                             const InverseCoeffs& a, Jacobian* Jli) {
+    const Mat3 Ji =
+        detail::w_polynomial(Scalar(1), Scalar(-0.5),
+                             detail::so3_left_jacobian_inverse_d2<Scalar>(theta), omega, theta2);
+    const Scalar wn = omega.dot(nu);
+    const Point Wnu = omega.cross(nu);
+    const Point W2nu = wn * omega - theta2 * nu;
+    // P = c2·ωνᵀ − c1·[ν]x + c2·(ωᵀν)·I
+    Mat3 P = (c.c2 * omega) * nu.transpose();
+    const Scalar pd = c.c2 * wn;
+    const Scalar n0 = c.c1 * nu[0], n1 = c.c1 * nu[1], n2 = c.c1 * nu[2];
+    P(0, 0) += pd;
+    P(1, 1) += pd;
+    P(2, 2) += pd;
+    P(0, 1) += n2;
+    P(1, 0) -= n2;
+    P(0, 2) -= n1;
+    P(2, 0) += n1;
+    P(1, 2) += n0;
+    P(2, 1) -= n0;
+    // A·J⁻¹ = [t]x + P·J⁻¹ + u·ωᵀ,  u = c1t·Wν + c2t·W²ν − 2c2·ν
+    Mat3 AJi = detail::mul3(P, Ji);
+    const Point u = c.c1t * Wnu + c.c2t * W2nu - Scalar(2) * c.c2 * nu;
+    AJi.noalias() += u * omega.transpose();
+    AJi(0, 1) -= t[2];
+    AJi(1, 0) += t[2];
+    AJi(0, 2) += t[1];
+    AJi(2, 0) -= t[1];
+    AJi(1, 2) -= t[0];
+    AJi(2, 1) += t[0];
     const Point b = c.c0s * nu + c.c1s * Wnu + c.c2s * W2nu - t;
+    const Mat3 Ci = detail::w_polynomial(a.a0, a.a1, a.a2, omega, theta2);
     Jli->setZero();
     Jli->template block<3, 3>(kOmega, kOmega) = Ji;
     (*Jli)(kSigma, kSigma) = Scalar(1);
-    Jli->template block<3, 3>(kNu, kOmega).noalias() = -Ci * AJi;
-    Jli->template block<3, 1>(kNu, kSigma).noalias() = -Ci * b;
+    Jli->template block<3, 3>(kNu, kOmega) = -detail::mul3(Ci, AJi);
+    Jli->template block<3, 1>(kNu, kSigma) = -detail::mul3(Ci, b);
     Jli->template block<3, 3>(kNu, kNu) = Ci;
   }
 
@@ -353,11 +367,9 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
       Jl->template block<3, 3>(kNu, kNu) = C;
     }
     if (Jli) {
-      const Mat3 W = skew<Scalar>(omega);
-      const Mat3 W2 = W * W;
-      const Mat3 C = v_matrix(W, W2, c);
-      inverse_blocks(omega, theta, nu, C * nu, W, W2, c, v_matrix_inverse(W, W2, c, theta * theta),
-                     Jli);
+      const Scalar theta2 = omega.squaredNorm();
+      const Point t = detail::w_polynomial_times(c.c0, c.c1, c.c2, omega, theta2, nu);
+      inverse_blocks(omega, theta, theta2, nu, t, c, v_inverse_coeffs(c, theta2), Jli);
     }
   }
 
