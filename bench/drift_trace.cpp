@@ -3,7 +3,7 @@
 // Where bench_solver's rows follow each other in one process (and reuse or inherit each other's
 // memory), this is the solve a user runs once: the fresh-process A/B of BENCHMARKS.md round 7.
 //
-// usage: drift_trace [keyframes = 10000] [lambda0 = 1e-8]
+// usage: drift_trace [keyframes = 10000] [lambda0 = 1e-8] [seed = 7, the benchmark's]
 //   GEODRIFT_HUGE_PAGES=1 puts the solver's large arrays on huge pages (large_array_allocator.hpp).
 #include <cstdio>
 #include <cstdlib>
@@ -18,11 +18,13 @@ int main(int argc, char** argv) {
   namespace solver = geodrift::solver;
   const int n = argc > 1 ? std::atoi(argv[1]) : 10000;
   const double lambda0 = argc > 2 ? std::atof(argv[2]) : gb::kLowDampingLambda;
-  if (n < 10 || n > 1000000 || !(lambda0 > 0.0)) {
-    std::fprintf(stderr, "usage: drift_trace [keyframes in 10..1000000] [lambda0 > 0]\n");
+  const long seed = argc > 3 ? std::atol(argv[3]) : static_cast<long>(gb::kSeed);
+  if (n < 10 || n > 1000000 || !(lambda0 > 0.0) || seed < 0) {
+    std::fprintf(stderr,
+                 "usage: drift_trace [keyframes in 10..1000000] [lambda0 > 0] [seed >= 0]\n");
     return 2;
   }
-  gb::OurDriftGraph p(gb::make_drift_graph(n, gb::kSeed));
+  gb::OurDriftGraph p(gb::make_drift_graph(n, static_cast<unsigned>(seed)));
   solver::LevenbergMarquardt lm(gb::accel_options(solver::LinearSolverType::kAuto, 1, lambda0));
   const solver::Summary s = lm.solve(&p.problem);
   std::printf("%s\nhuge pages: %s\n", s.brief_report().c_str(),
