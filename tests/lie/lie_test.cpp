@@ -438,7 +438,8 @@ TEST_CASE(
     "the matrix forms",
     "[lie]") {
   // Sim3::log and its Jl^-1 build k0 I + k1 W + k2 W^2 without W*W (w_polynomial) and multiply
-  // 3x3 matrices with mul3; both against Eigen's products, seeded, |ω| from 1e-8 to ≈ 5.
+  // 3x3 matrices with mul3 (and add k*[v]x with add_skew); all against Eigen's products, seeded,
+  // |ω| from 1e-8 to ≈ 5.
   namespace detail = geodrift::lie::detail;
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -461,7 +462,9 @@ TEST_CASE(
     CHECK((P - ref).cwiseAbs().maxCoeff() <= 1e-15 * (1.0 + ref.cwiseAbs().maxCoeff()));
     CHECK((Pv - ref * v).cwiseAbs().maxCoeff() <= 1e-15 * (1.0 + (ref * v).norm()));
     CHECK((detail::mul3(A, B) - A * B).cwiseAbs().maxCoeff() <= 1e-15);
-    CHECK((detail::mul3(A, v) - A * v).cwiseAbs().maxCoeff() <= 1e-15);
+    Eigen::Matrix3d As = A;
+    detail::add_skew(&As, k1, v);
+    CHECK((As - (A + k1 * detail::skew<double>(v))).cwiseAbs().maxCoeff() <= 1e-15);
   }
 }
 

@@ -69,10 +69,12 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
                   J_S_xi->template block<3, 3>(kNu, kNu) * xi.template segment<3>(kNu),
                   exp(xi[kSigma]), Raw{});
     }
+    using std::sqrt;
     const Point omega = xi.template segment<3>(kOmega);
-    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(omega.norm(), xi[kSigma], false);
+    const Scalar theta2 = omega.squaredNorm();
+    const detail::VCoeffs<Scalar> c = detail::sim3_coeffs<Scalar>(sqrt(theta2), xi[kSigma], false);
     return Sim3(SO3<Scalar>::exp(omega),
-                detail::w_polynomial_times(c.c0, c.c1, c.c2, omega, omega.squaredNorm(),
+                detail::w_polynomial_times(c.c0, c.c1, c.c2, omega, theta2,
                                            Point(xi.template segment<3>(kNu))),
                 exp(xi[kSigma]), Raw{});
   }
@@ -318,33 +320,23 @@ class Sim3 : public LieGroupBase<Sim3<Scalar>> {
     // P = c2·ωνᵀ − c1·[ν]x + c2·(ωᵀν)·I
     Mat3 P = (c.c2 * omega) * nu.transpose();
     const Scalar pd = c.c2 * wn;
-    const Scalar n0 = c.c1 * nu[0], n1 = c.c1 * nu[1], n2 = c.c1 * nu[2];
     P(0, 0) += pd;
     P(1, 1) += pd;
     P(2, 2) += pd;
-    P(0, 1) += n2;
-    P(1, 0) -= n2;
-    P(0, 2) -= n1;
-    P(2, 0) += n1;
-    P(1, 2) += n0;
-    P(2, 1) -= n0;
+    detail::add_skew(&P, -c.c1, nu);
     // A·J⁻¹ = [t]x + P·J⁻¹ + u·ωᵀ,  u = c1t·Wν + c2t·W²ν − 2c2·ν
     Mat3 AJi = detail::mul3(P, Ji);
     const Point u = c.c1t * Wnu + c.c2t * W2nu - Scalar(2) * c.c2 * nu;
     AJi.noalias() += u * omega.transpose();
-    AJi(0, 1) -= t[2];
-    AJi(1, 0) += t[2];
-    AJi(0, 2) += t[1];
-    AJi(2, 0) -= t[1];
-    AJi(1, 2) -= t[0];
-    AJi(2, 1) += t[0];
+    detail::add_skew(&AJi, Scalar(1), t);
     const Point b = c.c0s * nu + c.c1s * Wnu + c.c2s * W2nu - t;
     const Mat3 Ci = detail::w_polynomial(a.a0, a.a1, a.a2, omega, theta2);
     Jli->setZero();
     Jli->template block<3, 3>(kOmega, kOmega) = Ji;
     (*Jli)(kSigma, kSigma) = Scalar(1);
     Jli->template block<3, 3>(kNu, kOmega) = -detail::mul3(Ci, AJi);
-    Jli->template block<3, 1>(kNu, kSigma) = -detail::mul3(Ci, b);
+    Jli->template block<3, 1>(kNu, kSigma) =
+        -detail::w_polynomial_times(a.a0, a.a1, a.a2, omega, theta2, b);
     Jli->template block<3, 3>(kNu, kNu) = Ci;
   }
 

@@ -30,6 +30,18 @@ Mat3<Scalar> skew(const Vec3<Scalar>& v) {
   return m;
 }
 
+/// M += k·[v]x, entry by entry (no skew matrix formed).
+template <typename Scalar>
+void add_skew(Mat3<Scalar>* M, Scalar k, const Vec3<Scalar>& v) {
+  const Scalar x = k * v[0], y = k * v[1], z = k * v[2];
+  (*M)(0, 1) -= z;
+  (*M)(1, 0) += z;
+  (*M)(0, 2) += y;
+  (*M)(2, 0) -= y;
+  (*M)(1, 2) -= x;
+  (*M)(2, 1) += x;
+}
+
 /// A·B for 3×3 matrices, written out: Eigen's fixed-size product and its assignment were two
 /// out-of-line calls at -O2 in the Sim(3) log path (≈ 5 % of a pose-graph linearisation).
 template <typename Scalar>
@@ -43,14 +55,6 @@ Mat3<Scalar> mul3(const Mat3<Scalar>& A, const Mat3<Scalar>& B) {
     C(2, j) = A(2, 0) * b0 + A(2, 1) * b1 + A(2, 2) * b2;
   }
   return C;
-}
-
-/// A·x for a 3×3 matrix, written out (see mul3).
-template <typename Scalar>
-Vec3<Scalar> mul3(const Mat3<Scalar>& A, const Vec3<Scalar>& x) {
-  return Vec3<Scalar>(A(0, 0) * x[0] + A(0, 1) * x[1] + A(0, 2) * x[2],
-                      A(1, 0) * x[0] + A(1, 1) * x[1] + A(1, 2) * x[2],
-                      A(2, 0) * x[0] + A(2, 1) * x[1] + A(2, 2) * x[2]);
 }
 
 /// The polynomial k0·I + k1·W + k2·W² in W = [ω]x as a matrix, from W² = ωωᵀ − θ²·I
