@@ -10,7 +10,8 @@ solve (counter total_cpu_ms); reach = the first iteration of our trace whose cos
 <= 1.001 x the final cost of the Ceres row with the same initial damping (counters reach_*).
 "vs Ceres' defaults" divides the default Ceres row's CPU time by that same reach time; for the
 low-damping rows this is conservative (their target, the low-damping Ceres cost, is the lower
-of the two Ceres costs in every run so far).
+of the two Ceres costs in every run so far). A low-damping row in a run without
+CeresLowDamping shows its reach of the default Ceres row's cost (counters reach_default_*).
 """
 import json
 import re
@@ -59,10 +60,15 @@ for key in sorted(cases, key=lambda k: (kinds[k[0]], k[1], k[3])):
         else:
             ri = b.get("reach_iterations")
             ceres = cases[key].get("Ceres")
+            rd = b.get("reach_default_iterations")
             if ri is not None:
                 line += f"{ri:.0f} | {b['reach_cpu_ms']:,.0f} | {b['reach_ratio_cpu']:.2f}× | "
                 line += (f"{ceres.get('total_cpu_ms', ceres['cpu_time']) / b['reach_cpu_ms']:.2f}× | "
                          if ceres is not None else "– | ")
+            elif rd is not None:
+                # no Ceres row with the same damping in the run: reach of Ceres' defaults
+                line += (f"{rd:.0f} (of Ceres' defaults) | {b['reach_default_cpu_ms']:,.0f} | – | "
+                         f"{b['reach_default_ratio_cpu']:.2f}× | ")
             else:
                 line += "not reached | – | – | – | "
             line += f"{b.get('cost_vs_ceres', float('nan')):.1e} |"
