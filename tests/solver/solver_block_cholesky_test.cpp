@@ -80,14 +80,23 @@ TEST_CASE("Block Cholesky solves like dense LDLT and CHOLMOD on any pattern and 
     const char* name;
     int nb, B;
     std::vector<std::pair<int, int>> pairs;
+    bool fill_free;  ///< no fill in the natural order
   };
+  // Fill-free but not banded: a chain whose last block is coupled to every block, and a tree
+  // whose parents come after their children (block i's parent is 20 + i / 2), so
+  // the in-place factor's rows meet in scattered blocks.
+  std::vector<std::pair<int, int>> arrow = chain(30, 1), tree;
+  for (int i = 0; i < 29; ++i) arrow.emplace_back(i, 29);
+  for (int i = 0; i + 1 < 40; ++i) tree.emplace_back(i, 20 + i / 2);
   const std::vector<Case> cases{
-      {"chain 6 links, B=7", 60, 7, chain(60, 6)},
-      {"chain 2 links, B=6", 45, 6, chain(45, 2)},
-      {"random graph with fill, B=6", 40, 6, random_graph(40, 50, 3)},
-      {"random graph with fill, B=7", 35, 7, random_graph(35, 30, 4)},
-      {"block diagonal, B=7", 5, 7, {}},
-      {"single block, B=6", 1, 6, {}},
+      {"chain 6 links, B=7", 60, 7, chain(60, 6), true},
+      {"chain 2 links, B=6", 45, 6, chain(45, 2), true},
+      {"chain 1 link + arrow, B=7", 30, 7, arrow, true},
+      {"tree, B=6", 40, 6, tree, true},
+      {"random graph with fill, B=6", 40, 6, random_graph(40, 50, 3), false},
+      {"random graph with fill, B=7", 35, 7, random_graph(35, 30, 4), false},
+      {"block diagonal, B=7", 5, 7, {}, true},
+      {"single block, B=6", 1, 6, {}, true},
   };
   for (const Case& c : cases) {
     RandomSpd m(c.nb, c.B, c.pairs, 11);
@@ -127,6 +136,37 @@ TEST_CASE("Block Cholesky solves like dense LDLT and CHOLMOD on any pattern and 
       }
       CHECK(bc.factor_nnz() > 0.0);
       CHECK(bc.flops() > 0.0);
+      // In place: only when the chosen order has no fill; then H's values hold L (block row i
+      // of L in block column i of H) and L·Lᵀ = H; otherwise H is left alone.
+      const bool natural = std::is_sorted(bc.permutation().begin(), bc.permutation().end());
+      CHECK(bc.in_place() == (c.fill_free && natural));
+      solver::BlockSparseMatrix Hc = *m.H;
+      for (int rep = 0; rep < 2; ++rep) {
+        Hc = *m.H;
+        Eigen::VectorXd xi = Eigen::VectorXd::Constant(D.rows(), 5.0);
+        bool overwritten = true;
+        REQUIRE(bc.factorize_and_solve_in_place(&Hc, b.data(), xi.data(), &overwritten) ==
+                LinearSolverStatus::kSuccess);
+        CHECK(overwritten == bc.in_place());
+        CHECK(test::near(xi, ref, 1e-9));
+        CHECK((D * xi - b).norm() < 1e-9 * b.norm());
+        Eigen::VectorXd xs(D.rows());
+        REQUIRE(bc.solve(b.data(), xs.data()) == LinearSolverStatus::kSuccess);
+        CHECK((xs - xi).norm() <= 1e-14 * xi.norm());
+      }
+      if (bc.in_place()) {
+        Eigen::MatrixXd L = Eigen::MatrixXd::Zero(D.rows(), D.cols());
+        const auto& bcp = m.s.block_col_ptr();
+        for (int i = 0; i < c.nb; ++i)
+          for (int k = bcp[i]; k < bcp[i + 1]; ++k) {
+            const int j = m.s.block_rows()[k];
+            L.block(m.s.block_col(i), m.s.block_col(j), c.B, c.B) = Hc.block(j, i);
+          }
+        CHECK((L.triangularView<Eigen::StrictlyUpper>().toDenseMatrix()).norm() == 0.0);
+        CHECK((L * L.transpose() - D).norm() <= 1e-12 * D.norm());
+      } else {
+        CHECK((Hc.to_dense() - D).norm() == 0.0);
+      }
     }
   }
 }
@@ -187,6 +227,17 @@ TEST_CASE("Block Cholesky: not positive definite or NaN is a status, and it reco
     CHECK(bc.factorize_and_solve(*m.H, b.data(), x.data()) ==
           LinearSolverStatus::kNotPositiveDefinite);
     CHECK(bc.solve(b.data(), x.data()) == LinearSolverStatus::kFatal);  // after a failed one
+  }
+  {  // in place: the same status, and solve() refuses after it
+    REQUIRE(bc.in_place());
+    solver::BlockSparseMatrix Hc = *m.H;
+    Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());
+    bool overwritten = false;
+    CHECK(bc.factorize_and_solve_in_place(&Hc, b.data(), x.data(), &overwritten) ==
+          LinearSolverStatus::kNotPositiveDefinite);
+    CHECK(overwritten);
+    CHECK_THAT(bc.message(), Catch::Contains("block 12"));
+    CHECK(bc.solve(b.data(), x.data()) == LinearSolverStatus::kFatal);
   }
   v[pos] = keep;
   REQUIRE(bc.factorize(*m.H) == LinearSolverStatus::kSuccess);
@@ -296,12 +347,59 @@ void check_block_kernels(std::mt19937* rng) {
     for (int r = 0; r < 5; ++r) err = std::max(err, (yk[r] - y_ref[r]).norm() / y_ref[r].norm());
     return err;
   };
+  // The in-place factor's kernels on blocks inside column-major panels (stride B + 5, the block
+  // at row offset 2): C -= Σ A_q·Bq_qᵀ over 3 pairs, out = C·Mᵀ, t -= L·x, t -= Lᵀ·x; the panel
+  // rows around the blocks must not change.
+  constexpr int kStride = B + 5;
+  using Panel = Eigen::Matrix<double, kStride, B>;
+  std::vector<Panel, Eigen::aligned_allocator<Panel>> panels(6);
+  for (Panel& pnl : panels)
+    for (int i = 0; i < pnl.size(); ++i) pnl.data()[i] = n(*rng);
+  const auto blk = [&](int k) -> Mat { return panels[k].template middleRows<B>(2); };
+  const Mat C0 = rnd();
+  Mat C_ref = C0;
+  for (int q = 0; q < 3; ++q) C_ref -= blk(q) * blk(3 + q).transpose();
+  Panel out_ref = panels[0];
+  out_ref.template middleRows<B>(2) = C_ref * M.transpose();
+  const Vec tv0 = rnd().col(3);
+  const Vec mv_ref = tv0 - blk(4) * xv, mtv_ref = tv0 - blk(5).transpose() * xv;
+  const auto in_place = [&](auto kernels) {
+    using K = decltype(kernels);
+    const double* A[3] = {panels[0].data() + 2, panels[1].data() + 2, panels[2].data() + 2};
+    const double* Bq[3] = {panels[3].data() + 2, panels[4].data() + 2, panels[5].data() + 2};
+    Mat C = C0;
+    K::nt_sum(C.data(), 3, A, kStride, Bq, kStride);
+    double err = (C - C_ref).norm() / C_ref.norm();
+    Mat C1 = C0;
+    K::nt_sum(C1.data(), 0, A, kStride, Bq, kStride);  // no pairs: C unchanged
+    err = std::max(err, (C1 - C0).norm());
+    Panel out = panels[0];
+    K::scale_store(C.data(), M.data(), out.data() + 2, kStride);
+    err = std::max(err, (out - out_ref).norm() / out_ref.norm());
+    Vec t = tv0;
+    K::mat_vec_sub(panels[4].data() + 2, kStride, xv.data(), t.data());
+    err = std::max(err, (t - mv_ref).norm() / mv_ref.norm());
+    t = tv0;
+    K::mat_t_vec_sub(panels[5].data() + 2, kStride, xv.data(), t.data());
+    err = std::max(err, (t - mtv_ref).norm() / mtv_ref.norm());
+    // The strided substitutions read the triangle through the stride.
+    Eigen::Matrix<double, kStride, B> tri = Eigen::Matrix<double, kStride, B>::Constant(3.0);
+    tri.template topRows<B>() = L;
+    Vec y1 = rhs;
+    solver::detail::lower_solve<B>(tri.data(), Li.data(), y1.data(), kStride);
+    err = std::max(err, (L_ref * y1 - rhs).norm() / rhs.norm());
+    y1 = rhs;
+    solver::detail::lower_transpose_solve<B>(tri.data(), Li.data(), y1.data(), kStride);
+    return std::max(err, (L_ref.transpose() * y1 - rhs).norm() / rhs.norm());
+  };
   CHECK(run(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
   CHECK(subst(solver::detail::BlockKernelsEigen<B>()) <= 1e-14);
+  CHECK(in_place(solver::detail::BlockKernelsEigen<B>()) <= 1e-12);
 #ifdef GEODRIFT_AVX2_KERNELS
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     CHECK(run(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
     CHECK(subst(solver::detail::BlockKernelsAvx2<B>()) <= 1e-14);
+    CHECK(in_place(solver::detail::BlockKernelsAvx2<B>()) <= 1e-12);
     // gram(): JᵀJ of a residual block's Jacobian, symmetric to the bit.
     const Mat J = blocks[2];
     const Mat G_ref = J.transpose() * J;

@@ -27,6 +27,12 @@
 ///  - solve(): block forward / backward substitution: y −= L_ij·x and t −= L_ijᵀ·y by the same
 ///    kernels, the diagonal triangles by substitution (not the products with their inverses:
 ///    detail::lower_solve). factorize_and_solve() does the forward half inside factorize().
+///  - In place (factorize_and_solve_in_place(), what LM uses): when the order is the natural one
+///    and has no fill, L's block pattern is H's own, and the factor is written over H's values
+///    instead of a matrix of its own: block column i of H's upper storage becomes block row i
+///    of L, computed row by row (up-looking; BlockFactor::factorize_in_place_with). No memory for
+///    L (137 MB at 50k Sim(3) keyframes, whose first touch cost more than the factorisation on
+///    the project's VMs: BENCHMARKS.md round 14) and no copy of H into it.
 
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>
@@ -68,6 +74,10 @@ struct BlockSymbolic {
   std::vector<int> src_stride;  ///< per stored H block: its outer stride (column height)
   std::vector<char> fill_slot;  ///< per slot of L: 1 if no block of H lands there (fill-in)
   double flops = 0.0;           ///< factorisation flops (B×B GEMM = 2B³)
+  int max_row_blocks = 0;       ///< most blocks in one block row of L
+  /// The natural order without fill: L's block pattern is H's, so the factor can overwrite H
+  /// (BlockFactor::factorize_in_place).
+  bool in_place = false;
 
   /// L's column structure for ordering `perm` of the block graph given as symmetric lower
   /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry, and in
@@ -155,6 +165,12 @@ struct BlockSymbolic {
       }
     out->fill_slot.assign(out->row.size(), 1);
     for (std::size_t k = 0; k < nh; ++k) out->fill_slot[out->src_slot[k]] = 0;
+    std::vector<int> row_blocks(nb, 0);
+    for (const int r : out->row) ++row_blocks[r];
+    out->max_row_blocks = nb > 0 ? *std::max_element(row_blocks.begin(), row_blocks.end()) : 0;
+    bool natural = true;
+    for (int q = 0; q < nb; ++q) natural = natural && perm[q] == q;
+    out->in_place = natural && fill_blocks == 0;
     out->src_stride.assign(nh, 0);
     for (int b = 0; b < nb; ++b)
       for (int k = bcp[b]; k < bcp[b + 1]; ++k) out->src_stride[k] = s.column_height(b);
@@ -181,6 +197,10 @@ class BlockFactorBase {
   /// during the factorisation, then the backward one).
   virtual int factorize(const BlockStructure& s, const double* values, const double* b = nullptr,
                         double* x = nullptr) = 0;
+  /// factorize() with the factor written over H's values (only when BlockSymbolic::in_place);
+  /// solve() then reads them, so they must stay untouched until the last solve.
+  virtual int factorize_in_place(const BlockStructure& s, double* values, const double* b,
+                                 double* x) = 0;
   virtual void solve(const double* b, double* x) = 0;
 };
 
@@ -193,12 +213,14 @@ class BlockFactor final : public BlockFactorBase {
 
   void setup(const BlockSymbolic* sym) override {
     sym_ = sym;
-    // L is not zeroed: factorize() writes every block of it (H's blocks, zeroed fill-in)
-    // before reading it, and BlockCholeskySolver::solve() refuses to run before a successful
-    // factorize(). (Eigen's default constructor leaves the fresh pages untouched until then:
-    // one pass over 137 MB less at 50k keyframes.)
+    // L is allocated by the first factorize() that needs it (factorize_in_place() does not)
+    // and not zeroed: factorize() writes every block of it (H's blocks, zeroed fill-in) before
+    // reading it, and BlockCholeskySolver::solve() refuses to run before a successful
+    // factorisation.
     L_.clear();
-    L_.resize(sym->row.size());
+    in_place_ = false;
+    pa_.assign(static_cast<std::size_t>(sym->max_row_blocks), nullptr);
+    pb_.assign(static_cast<std::size_t>(sym->max_row_blocks), nullptr);
     Linv_.assign(static_cast<std::size_t>(sym->nb), Mat::Zero());
     y_.assign(static_cast<std::size_t>(sym->nb), Vec::Zero());
     slot_of_row_.assign(static_cast<std::size_t>(sym->nb), -1);
@@ -215,14 +237,123 @@ class BlockFactor final : public BlockFactorBase {
     return factorize_with<BlockKernelsEigen<B>>(s, values, b, x);
   }
 
+  int factorize_in_place(const BlockStructure& s, double* values, const double* b,
+                         double* x) override {
+    GEODRIFT_ASSERT(sym_->in_place);
+#ifdef GEODRIFT_AVX2_KERNELS
+    if (block_kernels_avx2()) return factorize_in_place_with<BlockKernelsAvx2<B>>(s, values, b, x);
+#endif
+    return factorize_in_place_with<BlockKernelsEigen<B>>(s, values, b, x);
+  }
+
   void solve(const double* b, double* x) override {
 #ifdef GEODRIFT_AVX2_KERNELS
-    if (block_kernels_avx2()) return solve_with<BlockKernelsAvx2<B>>(b, x);
+    if (block_kernels_avx2()) {
+      if (in_place_) return solve_in_place_with<BlockKernelsAvx2<B>>(b, x);
+      return solve_with<BlockKernelsAvx2<B>>(b, x);
+    }
 #endif
+    if (in_place_) return solve_in_place_with<BlockKernelsEigen<B>>(b, x);
     solve_with<BlockKernelsEigen<B>>(b, x);
   }
 
  private:
+  // ---- the factor in H's values (natural order without fill) --------------------------------
+  // Block column i of H's upper CSC holds H_ji for j ∈ R(i) (ascending, ending with i), each
+  // column-major with the column's height h_i as stride. It becomes block row i of L: L_ij in
+  // H_ji's place (same stride), L_ii (lower, zeros above) in H_ii's. Rows are computed in order
+  // (up-looking Cholesky): L_ij = (H_ij − Σ_{k<j} L_ik·L_jkᵀ)·L_jj⁻ᵀ for j ∈ R(i), j < i, then
+  // L_ii = chol(H_ii − Σ_{k<i} L_ik·L_ikᵀ); H_ji is read just before L_ij is written over it, and
+  // without fill every L_ik, L_jk that is not zero has a place in H. Same flops as the
+  // left-looking factorize(), no second matrix.
+  template <class Kernels>
+  int factorize_in_place_with(const BlockStructure& s, double* values, const double* b, double* x) {
+    const int nb = s.num_blocks();
+    const int* bcp = s.block_col_ptr().data();
+    const int* brow = s.block_rows().data();
+    const int* boff = s.block_offsets().data();
+    const double** pa = pa_.data();
+    const double** pb = pb_.data();
+    in_place_ = false;
+    in_place_s_ = &s;
+    in_place_values_ = values;
+    if (b) load_rhs(b);
+    alignas(32) double C[B * B];
+    for (int i = 0; i < nb; ++i) {
+      const int p0 = bcp[i], pd = bcp[i + 1] - 1;  // pd: H_ii
+      const int h = s.column_height(i);
+      for (int q = p0; q < pd; ++q) {
+        const int j = brow[q];
+        Kernels::load_transposed(values + boff[q], h, C);  // H_ij = H_jiᵀ
+        // k < j with L_ik (row i, positions p0..q-1, already factored) and L_jk (row j) ≠ 0.
+        int m = 0;
+        for (int u = p0, v = bcp[j], ve = bcp[j + 1] - 1; u < q && v < ve;) {
+          if (brow[u] < brow[v]) {
+            ++u;
+          } else if (brow[v] < brow[u]) {
+            ++v;
+          } else {
+            pa[m] = values + boff[u];
+            pb[m] = values + boff[v];
+            ++m, ++u, ++v;
+          }
+        }
+        Kernels::nt_sum(C, m, pa, h, pb, s.column_height(j));
+        Kernels::scale_store(C, Linv_[j].data(), values + boff[q], h);
+      }
+      double* Hd = values + boff[pd];
+      for (int c = 0; c < B; ++c)
+        for (int r = 0; r <= c; ++r) C[r + c * B] = C[c + r * B] = Hd[r + c * h];  // upper
+      int m = 0;
+      for (int u = p0; u < pd; ++u) pa[m++] = values + boff[u];
+      Kernels::nt_sum(C, m, pa, h, pa, h);
+      if (!cholesky_inverse<B>(C, Linv_[i].data())) return i + 1;
+      for (int c = 0; c < B; ++c)
+        for (int r = 0; r < B; ++r) Hd[r + c * h] = C[r + c * B];
+      if (b) forward_row_in_place<Kernels>(i);  // row i of L is still in cache
+    }
+    in_place_ = true;
+    if (b) backward_in_place<Kernels>(x);
+    return 0;
+  }
+  /// y_i ← L_ii⁻¹·(y_i − Σ_{j<i} L_ij·y_j).
+  template <class Kernels>
+  void forward_row_in_place(int i) {
+    const BlockStructure& s = *in_place_s_;
+    const int* boff = s.block_offsets().data();
+    const int* brow = s.block_rows().data();
+    const int p0 = s.block_col_ptr()[i], pd = s.block_col_ptr()[i + 1] - 1;
+    const int h = s.column_height(i);
+    double* y = y_.data()->data();
+    for (int q = p0; q < pd; ++q)
+      Kernels::mat_vec_sub(in_place_values_ + boff[q], h, y + B * brow[q], y + B * i);
+    lower_solve<B>(in_place_values_ + boff[pd], Linv_[i].data(), y + B * i, h);
+  }
+  /// Lᵀ·x = y by rows from the last: x_i = L_ii⁻ᵀ·y_i, then y_j −= L_ijᵀ·x_i for j ∈ R(i).
+  template <class Kernels>
+  void backward_in_place(double* x) {
+    const BlockStructure& s = *in_place_s_;
+    const int* boff = s.block_offsets().data();
+    const int* brow = s.block_rows().data();
+    const int* bcp = s.block_col_ptr().data();
+    double* y = y_.data()->data();
+    for (int i = s.num_blocks() - 1; i >= 0; --i) {
+      const int p0 = bcp[i], pd = bcp[i + 1] - 1;
+      const int h = s.column_height(i);
+      lower_transpose_solve<B>(in_place_values_ + boff[pd], Linv_[i].data(), y + B * i, h);
+      for (int q = p0; q < pd; ++q)
+        Kernels::mat_t_vec_sub(in_place_values_ + boff[q], h, y + B * i, y + B * brow[q]);
+    }
+    for (int j = 0; j < sym_->nb; ++j) Eigen::Map<Vec>(x + B * sym_->perm[j]) = y_[j];
+  }
+  template <class Kernels>
+  void solve_in_place_with(const double* b, double* x) {
+    load_rhs(b);
+    for (int i = 0; i < sym_->nb; ++i) forward_row_in_place<Kernels>(i);
+    backward_in_place<Kernels>(x);
+  }
+
+  // ---- the factor in its own storage L_ (any order) -----------------------------------------
   template <class Kernels>
   void solve_with(const double* b, double* x) {
     const BlockSymbolic& S = *sym_;
@@ -271,6 +402,8 @@ class BlockFactor final : public BlockFactorBase {
     const int* cp = S.col_ptr.data();
     const int* rw = S.row.data();
     static_assert(sizeof(Mat) == sizeof(double) * B * B, "L_ is B×B blocks back to back");
+    in_place_ = false;
+    if (L_.size() != S.row.size()) L_.resize(S.row.size());  // once (see setup())
     double* L = L_.data()->data();
     // One pass over L: column j is zeroed and loaded from H just before its updates (it is
     // still in cache when the updates and the diagonal solve touch it).
@@ -330,6 +463,12 @@ class BlockFactor final : public BlockFactorBase {
   std::vector<Mat, Eigen::aligned_allocator<Mat>> L_, Linv_;
   std::vector<Vec, Eigen::aligned_allocator<Vec>> y_;
   std::vector<int> slot_of_row_, head_, next_, ptr_;
+  // The in-place factor: whether the last successful factorisation is in H's values, which
+  // matrix, and the block pointers of one row's products.
+  bool in_place_ = false;
+  const BlockStructure* in_place_s_ = nullptr;
+  const double* in_place_values_ = nullptr;
+  std::vector<const double*> pa_, pb_;
 };
 
 }  // namespace detail
@@ -403,6 +542,25 @@ class BlockCholeskySolver final : public LinearSolver {
     return factorize_impl(H, b, x);
   }
 
+  /// Whether the analysed pattern lets the factor overwrite H (the natural order without fill,
+  /// as on chains of keyframes linked to their next few): then factorize_and_solve_in_place()
+  /// needs no memory for L (at 50k Sim(3) keyframes 137 MB less to allocate and first-touch,
+  /// and no copy of H into it).
+  bool in_place() const { return factor_ && sym_.in_place; }
+
+  /// With in_place(): the factor is written over H's values (row by row, see BlockFactor), and
+  /// solve() reads it there until the next factorisation, so H must not change meanwhile.
+  /// Otherwise factorize_and_solve().
+  LinearSolverStatus factorize_and_solve_in_place(BlockSparseMatrix* H, const double* b, double* x,
+                                                  bool* overwritten) override {
+    *overwritten = false;
+    if (!in_place()) return factorize_impl(*H, b, x);
+    const LinearSolverStatus st = check(*H);
+    if (st != LinearSolverStatus::kSuccess) return st;
+    *overwritten = true;
+    return finish(factor_->factorize_in_place(H->structure(), H->values(), b, x));
+  }
+
   std::string name() const override { return "block-cholesky"; }
   double factor_nnz() const override {
     if (!factor_) return 0.0;
@@ -419,8 +577,9 @@ class BlockCholeskySolver final : public LinearSolver {
   const std::vector<int>& permutation() const { return sym_.perm; }
 
  private:
-  LinearSolverStatus factorize_impl(const BlockSparseMatrix& H, const double* b, double* x) {
+  LinearSolverStatus check(const BlockSparseMatrix& H) {
     message_.clear();
+    factorized_ = false;
     if (!factor_) {
       message_ = "block Cholesky: factorize() before analyze()";
       return LinearSolverStatus::kFatal;
@@ -429,8 +588,15 @@ class BlockCholeskySolver final : public LinearSolver {
       message_ = "block Cholesky: matrix size differs from the analysed one";
       return LinearSolverStatus::kFatal;
     }
-    factorized_ = false;
-    const int bad = factor_->factorize(H.structure(), H.values(), b, x);
+    return LinearSolverStatus::kSuccess;
+  }
+  LinearSolverStatus factorize_impl(const BlockSparseMatrix& H, const double* b, double* x) {
+    const LinearSolverStatus st = check(H);
+    if (st != LinearSolverStatus::kSuccess) return st;
+    return finish(factor_->factorize(H.structure(), H.values(), b, x));
+  }
+  /// The status of a factorisation that returned `bad` (0 or 1 + the failing block column).
+  LinearSolverStatus finish(int bad) {
     if (bad != 0) {
       message_ = "block Cholesky: matrix not positive definite (block " +
                  std::to_string(sym_.perm[bad - 1]) + ")";
@@ -453,7 +619,22 @@ class BlockCholeskySolver final : public LinearSolver {
           "elimination";
       return false;
     }
-    detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
+    if (ordering_ == Ordering::kBest) {
+      // The natural order's symbolic factor, built once: kept without running AMD (which
+      // minimises fill: there is none to remove) when it has no fill, as on a chain of keyframes
+      // linked to their next few; otherwise whichever of it and AMD's order needs fewer flops.
+      std::vector<int> natural(static_cast<std::size_t>(s.num_blocks()));
+      std::iota(natural.begin(), natural.end(), 0);
+      long fill = 0;
+      const double natural_cost = detail::BlockSymbolic::build(s, natural, B_, &sym_, &fill);
+      if (fill != 0) {
+        const std::vector<int> amd = amd_order(s);
+        if (detail::BlockSymbolic::build(s, amd, B_, nullptr) < natural_cost)
+          detail::BlockSymbolic::build(s, amd, B_, &sym_);
+      }
+    } else {
+      detail::BlockSymbolic::build(s, choose_order(s, ordering_), B_, &sym_);
+    }
     if (static_cast<double>(sym_.row.size()) > max_blocks_per_column * s.num_blocks()) {
       message_ = "block Cholesky: factor thicker than " + std::to_string(max_blocks_per_column) +
                  " blocks per column";
@@ -463,20 +644,12 @@ class BlockCholeskySolver final : public LinearSolver {
     return true;
   }
 
+  /// The order of kNatural / kAmd (kBest decides in symbolic_if_thin()).
   static std::vector<int> choose_order(const BlockStructure& s, Ordering ordering) {
-    const int nb = s.num_blocks();
-    std::vector<int> natural(nb);
-    std::iota(natural.begin(), natural.end(), 0);
-    if (ordering == Ordering::kNatural) return natural;
     if (ordering == Ordering::kAmd) return amd_order(s);
-    // kBest: a natural order without fill (a chain of keyframes linked to their next few, a
-    // band) is kept without running AMD, which minimises fill: there is none to remove.
-    const int B = s.block_size(0);
-    long fill = 0;
-    const double natural_cost = detail::BlockSymbolic::build(s, natural, B, nullptr, &fill);
-    if (fill == 0) return natural;
-    std::vector<int> amd = amd_order(s);
-    return detail::BlockSymbolic::build(s, amd, B, nullptr) < natural_cost ? amd : natural;
+    std::vector<int> natural(static_cast<std::size_t>(s.num_blocks()));
+    std::iota(natural.begin(), natural.end(), 0);
+    return natural;
   }
 
   static std::vector<int> amd_order(const BlockStructure& s) {

@@ -145,6 +145,13 @@ struct Options {
   /// backtracking. Costs one cost-only evaluation per rejected step and saves a factorisation
   /// and solve where the short step succeeds.
   bool backtracking = false;
+  /// Let the linear solver write its factor over H where it can
+  /// (LinearSolver::factorize_and_solve_in_place: the block Cholesky when its order has no fill,
+  /// chains of keyframes linked to their next few). Saves the factor's memory (137 MB at 50k
+  /// Sim(3) keyframes, whose first touch costs 0.2-0.4 s on the project's VMs) and the copy of H
+  /// into it; a rejected step then linearises x again to get H back (one linearisation more per
+  /// rejection, as after a rejected speculative trial). Same steps up to rounding either way.
+  bool in_place_factor = true;
   /// Threads for evaluation and assembly: 1 or 2 (2 splits the residual blocks whose H blocks
   /// fall in disjoint column halves; the rest run on one thread).
   int num_threads = 1;
@@ -424,7 +431,7 @@ class LevenbergMarquardt {
     // Buffers (sized once).
     H_.reset(&s);
     g_.resize(n);
-    g2_.resize(options_.speculative_linearization ? n : 0);
+    g2_.resize(n);  // the speculative trial's g, or x's again after an in-place factor
     diag_.resize(n);
     damp_.resize(n);
     rhs_.resize(n);
@@ -492,7 +499,11 @@ class LevenbergMarquardt {
       // block Cholesky does the forward substitution inside it; LinearSolver).
       rhs_ = -g_;
       const auto t0 = Clock::now();
-      LinearSolverStatus st = solver_->factorize_and_solve(H_, rhs_.data(), delta_.data());
+      bool h_overwritten = false;  // H_ holds the factor: a rejected step linearises x again
+      LinearSolverStatus st = options_.in_place_factor
+                                  ? solver_->factorize_and_solve_in_place(
+                                        &H_, rhs_.data(), delta_.data(), &h_overwritten)
+                                  : solver_->factorize_and_solve(H_, rhs_.data(), delta_.data());
       sum.time_factorize += std::chrono::duration<double>(Clock::now() - t0).count();
       if (st == LinearSolverStatus::kFatal)
         return done(sum, cost, lambda, Termination::kLinearSolverFailure, solver_->message(),
@@ -656,7 +667,9 @@ class LevenbergMarquardt {
                                    : std::string("last step: ") + solver_->message()),
                       finish);
         }
-        if (speculated) {  // H and the acceleration store hold the rejected trial: x again
+        // H and the acceleration store hold the rejected trial, or H holds the factor: H at x
+        // again (the same values as before).
+        if (speculated || h_overwritten) {
           LinearizeTimes lt2;
           double c2 = 0.0;
           ok = problem->linearize(&H_, g2_.data(), &c2, &lt2, &err, accel);

@@ -50,6 +50,16 @@ class LinearSolver {
     const LinearSolverStatus st = factorize(H);
     return st == LinearSolverStatus::kSuccess ? solve(b, x) : st;
   }
+  /// factorize_and_solve() that may keep the factor in H's own values instead of a matrix of
+  /// its own (*overwritten = true: H no longer holds H, and must stay untouched until the last
+  /// solve() with this factorisation); otherwise *overwritten = false and H is unchanged. LM
+  /// uses it and writes H again before it needs H after such a call (Options::in_place_factor).
+  /// Default: factorize_and_solve(), never in place (BlockCholeskySolver overrides it).
+  virtual LinearSolverStatus factorize_and_solve_in_place(BlockSparseMatrix* H, const double* b,
+                                                          double* x, bool* overwritten) {
+    *overwritten = false;
+    return factorize_and_solve(*H, b, x);
+  }
   /// Name for reports ("cholmod", "schur+cholmod", "dense").
   virtual std::string name() const = 0;
   /// Detail of the last non-success status (empty otherwise).

@@ -73,19 +73,21 @@ inline bool cholesky_inverse(double* D, double* Li) {
 /// with an explicit inverse loses accuracy with the block's condition number (on the
 /// ill-conditioned reduced camera system of a 3-camera BAL subset it stopped LM 10× further
 /// from the optimum by the gradient bound, solver_data tests).
+/// `stride`: L's column stride (B for a contiguous block; the column height of H's panel for the
+/// in-place factor).
 template <int B>
-inline void lower_solve(const double* L, const double* Li, double* y) {
+inline void lower_solve(const double* L, const double* Li, double* y, int stride = B) {
   for (int i = 0; i < B; ++i) {
     double v = y[i];
-    for (int k = 0; k < i; ++k) v -= L[i + k * B] * y[k];
+    for (int k = 0; k < i; ++k) v -= L[i + k * stride] * y[k];
     y[i] = v * Li[i + i * B];
   }
 }
 template <int B>
-inline void lower_transpose_solve(const double* L, const double* Li, double* y) {
+inline void lower_transpose_solve(const double* L, const double* Li, double* y, int stride = B) {
   for (int i = B - 1; i >= 0; --i) {
     double v = y[i];
-    for (int k = i + 1; k < B; ++k) v -= L[k + i * B] * y[k];
+    for (int k = i + 1; k < B; ++k) v -= L[k + i * stride] * y[k];
     y[i] = v * Li[i + i * B];
   }
 }
@@ -133,6 +135,33 @@ struct BlockKernelsEigen {
     Eigen::Map<Vec> tv(t);
     for (int q = begin; q < end; ++q)
       tv.noalias() -= ConstMap(L + q * B * B).transpose() * Eigen::Map<const Vec>(y + row[q] * B);
+  }
+
+  // The in-place factor's kernels (BlockFactor::factorize_in_place): its blocks live in H's
+  // panels, column-major with a run-time column stride; C and M are contiguous B×B blocks.
+  using Strided = Eigen::Map<Mat, 0, Eigen::OuterStride<>>;
+  using ConstStrided = Eigen::Map<const Mat, 0, Eigen::OuterStride<>>;
+  /// C −= Σ_{q < count} A[q]·Bq[q]ᵀ (A[q] with column stride sa, Bq[q] with column stride sb).
+  static void nt_sum(double* C, int count, const double* const* A, int sa, const double* const* Bq,
+                     int sb) {
+    Map c(C);
+    for (int q = 0; q < count; ++q)
+      c.noalias() -= ConstStrided(A[q], B, B, Eigen::OuterStride<>(sa)) *
+                     ConstStrided(Bq[q], B, B, Eigen::OuterStride<>(sb)).transpose();
+  }
+  /// out (column stride so) = C·Mᵀ.
+  static void scale_store(const double* C, const double* M, double* out, int so) {
+    Strided(out, B, B, Eigen::OuterStride<>(so)).noalias() = ConstMap(C) * ConstMap(M).transpose();
+  }
+  /// t −= L·x (L with column stride s).
+  static void mat_vec_sub(const double* L, int s, const double* x, double* t) {
+    Eigen::Map<Vec>(t).noalias() -=
+        ConstStrided(L, B, B, Eigen::OuterStride<>(s)) * Eigen::Map<const Vec>(x);
+  }
+  /// t −= Lᵀ·x (L with column stride s).
+  static void mat_t_vec_sub(const double* L, int s, const double* x, double* t) {
+    Eigen::Map<Vec>(t).noalias() -=
+        ConstStrided(L, B, B, Eigen::OuterStride<>(s)).transpose() * Eigen::Map<const Vec>(x);
   }
 };
 
@@ -287,6 +316,80 @@ struct BlockKernelsAvx2 {
     }
 #pragma GCC unroll 8
     for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
+  }
+
+  // The in-place factor's kernels (see BlockKernelsEigen).
+  /// Columns [C0, C1) of C −= Σ_q A[q]·Bq[q]ᵀ, kept in registers over all q: per column t of
+  /// A[q] two loads and, per column of C, one broadcast and two FMAs (the per-block update()
+  /// loads and stores C once per block).
+  template <int C0, int C1>
+  __attribute__((target("avx2,fma"), always_inline)) static inline void nt_columns(
+      double* C, int count, const double* const* A, int sa, const double* const* Bq, int sb) {
+    constexpr int kN = C1 - C0;
+    __m256d lo[kN], hi[kN];
+#pragma GCC unroll 4
+    for (int c = 0; c < kN; ++c) {
+      lo[c] = _mm256_loadu_pd(C + (C0 + c) * B);
+      hi[c] = _mm256_loadu_pd(C + (C0 + c) * B + kHi);
+    }
+    for (int q = 0; q < count; ++q) {
+      const double* a = A[q];
+      const double* b = Bq[q];
+#pragma GCC unroll 8
+      for (int t = 0; t < B; ++t) {
+        const __m256d a_lo = _mm256_loadu_pd(a + t * sa), a_hi = _mm256_loadu_pd(a + t * sa + kHi);
+#pragma GCC unroll 4
+        for (int c = 0; c < kN; ++c) {
+          const __m256d bb = _mm256_broadcast_sd(b + t * sb + C0 + c);  // Bq(C0 + c, t)
+          lo[c] = _mm256_fnmadd_pd(a_lo, bb, lo[c]);
+          hi[c] = _mm256_fnmadd_pd(a_hi, bb, hi[c]);
+        }
+      }
+    }
+#pragma GCC unroll 4
+    for (int c = 0; c < kN; ++c) {
+      _mm256_storeu_pd(C + (C0 + c) * B + kHi, hi[c]);  // the shared rows hold the same values
+      _mm256_storeu_pd(C + (C0 + c) * B, lo[c]);
+    }
+  }
+  __attribute__((target("avx2,fma"))) static void nt_sum(double* C, int count,
+                                                         const double* const* A, int sa,
+                                                         const double* const* Bq, int sb) {
+    constexpr int kHalf = (B + 1) / 2;  // 8 + 2 + 1 registers at most
+    nt_columns<0, kHalf>(C, count, A, sa, Bq, sb);
+    nt_columns<kHalf, B>(C, count, A, sa, Bq, sb);
+  }
+  __attribute__((target("avx2,fma"))) static void scale_store(const double* C, const double* M,
+                                                              double* out, int so) {
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) {
+      __m256d lo = _mm256_setzero_pd(), hi = _mm256_setzero_pd();
+      column<false>(C, M, c, &lo, &hi);
+      _mm256_storeu_pd(out + c * so + kHi, hi);
+      _mm256_storeu_pd(out + c * so, lo);
+    }
+  }
+  __attribute__((target("avx2,fma"))) static void mat_vec_sub(const double* L, int s,
+                                                              const double* x, double* t) {
+    __m256d lo = _mm256_loadu_pd(t), hi = _mm256_loadu_pd(t + kHi);
+#pragma GCC unroll 8
+    for (int k = 0; k < B; ++k) {
+      const __m256d xb = _mm256_broadcast_sd(x + k);
+      lo = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s), xb, lo);
+      hi = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s + kHi), xb, hi);
+    }
+    _mm256_storeu_pd(t + kHi, hi);
+    _mm256_storeu_pd(t, lo);
+  }
+  __attribute__((target("avx2,fma"))) static void mat_t_vec_sub(const double* L, int s,
+                                                                const double* x, double* t) {
+    const __m256d lo = _mm256_loadu_pd(x), hi = _mm256_and_pd(_mm256_loadu_pd(x + kHi), hi_mask());
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) {
+      const __m256d acc = _mm256_fmadd_pd(_mm256_loadu_pd(L + c * s), lo,
+                                          _mm256_mul_pd(_mm256_loadu_pd(L + c * s + kHi), hi));
+      t[c] -= hsum(acc);
+    }
   }
 };
 #endif
