@@ -348,8 +348,8 @@ void check_block_kernels(std::mt19937* rng) {
     return err;
   };
   // The in-place factor's kernels on blocks inside column-major panels (stride B + 5, the block
-  // at row offset 2): C -= Σ A_q·Bq_qᵀ over 3 pairs, out = C·Mᵀ, t -= L·x, t -= Lᵀ·x; the panel
-  // rows around the blocks must not change.
+  // at row offset 2): C -= Σ A_q·Bq_qᵀ over 3 pairs, out = C·Mᵀ, t -= Σ L_q·y_q, t -= Σ L_qᵀ·y_q;
+  // the panel rows around the blocks must not change.
   constexpr int kStride = B + 5;
   using Panel = Eigen::Matrix<double, kStride, B>;
   std::vector<Panel, Eigen::aligned_allocator<Panel>> panels(6);
@@ -362,7 +362,8 @@ void check_block_kernels(std::mt19937* rng) {
   Panel out_ref = panels[0];
   out_ref.template middleRows<B>(2) = C_ref * M.transpose();
   const Vec tv0 = rnd().col(3);
-  const Vec mv_ref = tv0 - blk(4) * xv, mtv_ref = tv0 - blk(5).transpose() * xv;
+  const Vec mv_ref = tv0 - blk(4) * xv - blk(2) * rhs,
+            mtv_ref = tv0 - blk(5).transpose() * rhs - blk(1).transpose() * xv;
   const auto in_place = [&](auto kernels) {
     using K = decltype(kernels);
     const double* A[3] = {panels[0].data() + 2, panels[1].data() + 2, panels[2].data() + 2};
@@ -377,11 +378,27 @@ void check_block_kernels(std::mt19937* rng) {
     K::scale_store(C.data(), M.data(), out.data() + 2, kStride);
     err = std::max(err, (out - out_ref).norm() / out_ref.norm());
     Vec t = tv0;
-    K::mat_vec_sub(panels[4].data() + 2, kStride, xv.data(), t.data());
+    // row_mat_vec_sub over the blocks of panels 4 and 2 with the y blocks 0 and 1.
+    const int row_off[2] = {static_cast<int>(panels[4].data() - panels[0].data()) + 2,
+                            static_cast<int>(panels[2].data() - panels[0].data()) + 2},
+              row_blk[2] = {0, 1};
+    Eigen::Matrix<double, 2 * B, 1> yx;
+    yx << xv, rhs;
+    K::row_mat_vec_sub(panels[0].data(), row_off, kStride, row_blk, 2, yx.data(), t.data());
     err = std::max(err, (t - mv_ref).norm() / mv_ref.norm());
+    // transpose_gather over the blocks of panels 5 and 1 (offsets from panel 0's data) with
+    // the y blocks 1 and 0.
     t = tv0;
-    K::mat_t_vec_sub(panels[5].data() + 2, kStride, xv.data(), t.data());
+    const int off[2] = {static_cast<int>(panels[5].data() - panels[0].data()) + 2,
+                        static_cast<int>(panels[1].data() - panels[0].data()) + 2},
+              stride[2] = {kStride, kStride}, yblk[2] = {1, 0};
+    Eigen::Matrix<double, 2 * B, 1> yy;
+    yy << xv, rhs;
+    K::transpose_gather(panels[0].data(), off, stride, yblk, 2, yy.data(), t.data());
     err = std::max(err, (t - mtv_ref).norm() / mtv_ref.norm());
+    t = tv0;
+    K::transpose_gather(panels[0].data(), off, stride, yblk, 0, yy.data(), t.data());
+    err = std::max(err, (t - tv0).norm());
     // The strided substitutions read the triangle through the stride.
     Eigen::Matrix<double, kStride, B> tri = Eigen::Matrix<double, kStride, B>::Constant(3.0);
     tri.template topRows<B>() = L;

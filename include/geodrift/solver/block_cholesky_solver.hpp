@@ -78,6 +78,11 @@ struct BlockSymbolic {
   /// The natural order without fill: L's block pattern is H's, so the factor can overwrite H
   /// (BlockFactor::factorize_in_place).
   bool in_place = false;
+  /// With in_place: block row j of H's upper storage (the blocks H_ji, i > j, = the blocks of
+  /// column j of L in place) as CSR: t_ptr[j] .. t_ptr[j+1] index t_col (i), t_off (the block's
+  /// offset in H's values) and t_stride (its column stride, column i's height), for the
+  /// backward substitution.
+  std::vector<int> t_ptr, t_col, t_off, t_stride;
 
   /// L's column structure for ordering `perm` of the block graph given as symmetric lower
   /// adjacency of original blocks; returns Σ (column count)² as a cost proxy when dry, and in
@@ -171,6 +176,27 @@ struct BlockSymbolic {
     bool natural = true;
     for (int q = 0; q < nb; ++q) natural = natural && perm[q] == q;
     out->in_place = natural && fill_blocks == 0;
+    out->t_ptr.assign(static_cast<std::size_t>(nb) + 1, 0);
+    out->t_col.clear();
+    out->t_off.clear();
+    out->t_stride.clear();
+    if (out->in_place) {
+      for (int b = 0; b < nb; ++b)
+        for (int k = bcp[b]; k < bcp[b + 1] - 1; ++k) ++out->t_ptr[brow[k] + 1];
+      for (int j = 0; j < nb; ++j) out->t_ptr[j + 1] += out->t_ptr[j];
+      const std::size_t nt = static_cast<std::size_t>(out->t_ptr[nb]);
+      out->t_col.resize(nt);
+      out->t_off.resize(nt);
+      out->t_stride.resize(nt);
+      std::vector<int> next(out->t_ptr.begin(), out->t_ptr.end() - 1);
+      for (int b = 0; b < nb; ++b)  // columns ascending: each row's list comes out sorted
+        for (int k = bcp[b]; k < bcp[b + 1] - 1; ++k) {
+          const int at = next[brow[k]]++;
+          out->t_col[at] = b;
+          out->t_off[at] = s.block_offsets()[k];
+          out->t_stride[at] = s.column_height(b);
+        }
+    }
     out->src_stride.assign(nh, 0);
     for (int b = 0; b < nb; ++b)
       for (int k = bcp[b]; k < bcp[b + 1]; ++k) out->src_stride[k] = s.column_height(b);
@@ -325,26 +351,26 @@ class BlockFactor final : public BlockFactorBase {
     const int p0 = s.block_col_ptr()[i], pd = s.block_col_ptr()[i + 1] - 1;
     const int h = s.column_height(i);
     double* y = y_.data()->data();
-    for (int q = p0; q < pd; ++q)
-      Kernels::mat_vec_sub(in_place_values_ + boff[q], h, y + B * brow[q], y + B * i);
+    Kernels::row_mat_vec_sub(in_place_values_, boff + p0, h, brow + p0, pd - p0, y, y + B * i);
     lower_solve<B>(in_place_values_ + boff[pd], Linv_[i].data(), y + B * i, h);
   }
-  /// Lᵀ·x = y by rows from the last: x_i = L_ii⁻ᵀ·y_i, then y_j −= L_ijᵀ·x_i for j ∈ R(i).
+  /// Lᵀ·x = y from the last block: x_j = L_jj⁻ᵀ·(y_j − Σ_{i>j} L_ijᵀ·x_i), the L_ij of column j
+  /// gathered from H's block row j (BlockSymbolic::t_*).
   template <class Kernels>
   void backward_in_place(double* x) {
+    const BlockSymbolic& S = *sym_;
     const BlockStructure& s = *in_place_s_;
     const int* boff = s.block_offsets().data();
-    const int* brow = s.block_rows().data();
     const int* bcp = s.block_col_ptr().data();
     double* y = y_.data()->data();
-    for (int i = s.num_blocks() - 1; i >= 0; --i) {
-      const int p0 = bcp[i], pd = bcp[i + 1] - 1;
-      const int h = s.column_height(i);
-      lower_transpose_solve<B>(in_place_values_ + boff[pd], Linv_[i].data(), y + B * i, h);
-      for (int q = p0; q < pd; ++q)
-        Kernels::mat_t_vec_sub(in_place_values_ + boff[q], h, y + B * i, y + B * brow[q]);
+    for (int j = S.nb - 1; j >= 0; --j) {
+      const int t0 = S.t_ptr[j], tn = S.t_ptr[j + 1] - t0;
+      Kernels::transpose_gather(in_place_values_, S.t_off.data() + t0, S.t_stride.data() + t0,
+                                S.t_col.data() + t0, tn, y, y + B * j);
+      lower_transpose_solve<B>(in_place_values_ + boff[bcp[j + 1] - 1], Linv_[j].data(), y + B * j,
+                               s.column_height(j));
     }
-    for (int j = 0; j < sym_->nb; ++j) Eigen::Map<Vec>(x + B * sym_->perm[j]) = y_[j];
+    for (int j = 0; j < S.nb; ++j) Eigen::Map<Vec>(x + B * S.perm[j]) = y_[j];
   }
   template <class Kernels>
   void solve_in_place_with(const double* b, double* x) {

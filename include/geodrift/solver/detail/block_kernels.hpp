@@ -153,15 +153,22 @@ struct BlockKernelsEigen {
   static void scale_store(const double* C, const double* M, double* out, int so) {
     Strided(out, B, B, Eigen::OuterStride<>(so)).noalias() = ConstMap(C) * ConstMap(M).transpose();
   }
-  /// t −= L·x (L with column stride s).
-  static void mat_vec_sub(const double* L, int s, const double* x, double* t) {
-    Eigen::Map<Vec>(t).noalias() -=
-        ConstStrided(L, B, B, Eigen::OuterStride<>(s)) * Eigen::Map<const Vec>(x);
+  /// t −= Σ_{q < count} L_q·y_blk[q], L_q at values + off[q] with column stride s.
+  static void row_mat_vec_sub(const double* values, const int* off, int s, const int* blk,
+                              int count, const double* y, double* t) {
+    Eigen::Map<Vec> tv(t);
+    for (int q = 0; q < count; ++q)
+      tv.noalias() -= ConstStrided(values + off[q], B, B, Eigen::OuterStride<>(s)) *
+                      Eigen::Map<const Vec>(y + B * blk[q]);
   }
-  /// t −= Lᵀ·x (L with column stride s).
-  static void mat_t_vec_sub(const double* L, int s, const double* x, double* t) {
-    Eigen::Map<Vec>(t).noalias() -=
-        ConstStrided(L, B, B, Eigen::OuterStride<>(s)).transpose() * Eigen::Map<const Vec>(x);
+  /// t −= Σ_{q < count} L_qᵀ·y_blk[q], L_q at values + off[q] with column stride stride[q].
+  static void transpose_gather(const double* values, const int* off, const int* stride,
+                               const int* blk, int count, const double* y, double* t) {
+    Eigen::Map<Vec> tv(t);
+    for (int q = 0; q < count; ++q)
+      tv.noalias() -=
+          ConstStrided(values + off[q], B, B, Eigen::OuterStride<>(stride[q])).transpose() *
+          Eigen::Map<const Vec>(y + B * blk[q]);
   }
 };
 
@@ -369,27 +376,56 @@ struct BlockKernelsAvx2 {
       _mm256_storeu_pd(out + c * so, lo);
     }
   }
-  __attribute__((target("avx2,fma"))) static void mat_vec_sub(const double* L, int s,
-                                                              const double* x, double* t) {
-    __m256d lo = _mm256_loadu_pd(t), hi = _mm256_loadu_pd(t + kHi);
+  /// t kept in registers over all q (a load of t after the previous block's two overlapping
+  /// stores would not be store-forwarded), in four accumulator pairs (column k of each block
+  /// into pair k mod 4) so that the FMAs do not wait on each other's latency.
+  __attribute__((target("avx2,fma"))) static void row_mat_vec_sub(const double* values,
+                                                                  const int* off, int s,
+                                                                  const int* blk, int count,
+                                                                  const double* y, double* t) {
+    __m256d lo[4] = {_mm256_loadu_pd(t), _mm256_setzero_pd(), _mm256_setzero_pd(),
+                     _mm256_setzero_pd()};
+    __m256d hi[4] = {_mm256_loadu_pd(t + kHi), _mm256_setzero_pd(), _mm256_setzero_pd(),
+                     _mm256_setzero_pd()};
+    for (int q = 0; q < count; ++q) {
+      const double* L = values + off[q];
+      const double* x = y + B * blk[q];
 #pragma GCC unroll 8
-    for (int k = 0; k < B; ++k) {
-      const __m256d xb = _mm256_broadcast_sd(x + k);
-      lo = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s), xb, lo);
-      hi = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s + kHi), xb, hi);
+      for (int k = 0; k < B; ++k) {
+        const __m256d xb = _mm256_broadcast_sd(x + k);
+        lo[k % 4] = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s), xb, lo[k % 4]);
+        hi[k % 4] = _mm256_fnmadd_pd(_mm256_loadu_pd(L + k * s + kHi), xb, hi[k % 4]);
+      }
     }
-    _mm256_storeu_pd(t + kHi, hi);
-    _mm256_storeu_pd(t, lo);
+    const __m256d l = _mm256_add_pd(_mm256_add_pd(lo[0], lo[1]), _mm256_add_pd(lo[2], lo[3]));
+    const __m256d h = _mm256_add_pd(_mm256_add_pd(hi[0], hi[1]), _mm256_add_pd(hi[2], hi[3]));
+    _mm256_storeu_pd(t + kHi, h);  // the shared row: the same operations in lo and hi
+    _mm256_storeu_pd(t, l);
   }
-  __attribute__((target("avx2,fma"))) static void mat_t_vec_sub(const double* L, int s,
-                                                                const double* x, double* t) {
-    const __m256d lo = _mm256_loadu_pd(x), hi = _mm256_and_pd(_mm256_loadu_pd(x + kHi), hi_mask());
+  /// One accumulator per column over all q, one horizontal sum per column at the end.
+  __attribute__((target("avx2,fma"))) static void transpose_gather(const double* values,
+                                                                   const int* off,
+                                                                   const int* stride,
+                                                                   const int* blk, int count,
+                                                                   const double* y, double* t) {
+    if (count == 0) return;
+    const __m256d mask = hi_mask();
+    __m256d acc[B];
 #pragma GCC unroll 8
-    for (int c = 0; c < B; ++c) {
-      const __m256d acc = _mm256_fmadd_pd(_mm256_loadu_pd(L + c * s), lo,
-                                          _mm256_mul_pd(_mm256_loadu_pd(L + c * s + kHi), hi));
-      t[c] -= hsum(acc);
+    for (int c = 0; c < B; ++c) acc[c] = _mm256_setzero_pd();
+    for (int q = 0; q < count; ++q) {
+      const double* A = values + off[q];
+      const int s = stride[q];
+      const double* yr = y + blk[q] * B;
+      const __m256d lo = _mm256_loadu_pd(yr), hi = _mm256_and_pd(_mm256_loadu_pd(yr + kHi), mask);
+#pragma GCC unroll 8
+      for (int c = 0; c < B; ++c) {
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s), lo, acc[c]);
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s + kHi), hi, acc[c]);
+      }
     }
+#pragma GCC unroll 8
+    for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
   }
 };
 #endif
