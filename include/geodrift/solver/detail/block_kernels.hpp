@@ -303,26 +303,43 @@ struct BlockKernelsAvx2 {
     }
   }
 
-  __attribute__((target("avx2,fma"))) static void transpose_update(const double* L, int begin,
-                                                                   int end, const int* row,
-                                                                   const double* y, double* t) {
-    if (begin >= end) return;
+  /// t −= Σ_{q < count} A_qᵀ·y_q with one accumulator per column of A_q (the repeated rows of
+  /// y_q masked) and one horizontal sum per column at the end; pair(q, &A, &s, &y) names the
+  /// q-th block (column stride s) and vector.
+  template <class Pair>
+  __attribute__((target("avx2,fma"), always_inline)) static inline void transpose_sum(
+      int count, const Pair& pair, double* t) {
+    if (count <= 0) return;
     const __m256d mask = hi_mask();
     __m256d acc[B];
 #pragma GCC unroll 8
     for (int c = 0; c < B; ++c) acc[c] = _mm256_setzero_pd();
-    for (int q = begin; q < end; ++q) {
-      const double* A = L + q * B * B;
-      const double* yr = y + row[q] * B;
+    for (int q = 0; q < count; ++q) {
+      const double* A;
+      const double* yr;
+      int s;
+      pair(q, &A, &s, &yr);
       const __m256d lo = _mm256_loadu_pd(yr), hi = _mm256_and_pd(_mm256_loadu_pd(yr + kHi), mask);
 #pragma GCC unroll 8
       for (int c = 0; c < B; ++c) {
-        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * B), lo, acc[c]);
-        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * B + kHi), hi, acc[c]);
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s), lo, acc[c]);
+        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s + kHi), hi, acc[c]);
       }
     }
 #pragma GCC unroll 8
     for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
+  }
+  __attribute__((target("avx2,fma"))) static void transpose_update(const double* L, int begin,
+                                                                   int end, const int* row,
+                                                                   const double* y, double* t) {
+    transpose_sum(
+        end - begin,
+        [&](int q, const double** A, int* s, const double** yr) {
+          *A = L + (begin + q) * B * B;
+          *s = B;
+          *yr = y + row[begin + q] * B;
+        },
+        t);
   }
 
   // The in-place factor's kernels (see BlockKernelsEigen).
@@ -402,30 +419,19 @@ struct BlockKernelsAvx2 {
     _mm256_storeu_pd(t + kHi, h);  // the shared row: the same operations in lo and hi
     _mm256_storeu_pd(t, l);
   }
-  /// One accumulator per column over all q, one horizontal sum per column at the end.
   __attribute__((target("avx2,fma"))) static void transpose_gather(const double* values,
                                                                    const int* off,
                                                                    const int* stride,
                                                                    const int* blk, int count,
                                                                    const double* y, double* t) {
-    if (count == 0) return;
-    const __m256d mask = hi_mask();
-    __m256d acc[B];
-#pragma GCC unroll 8
-    for (int c = 0; c < B; ++c) acc[c] = _mm256_setzero_pd();
-    for (int q = 0; q < count; ++q) {
-      const double* A = values + off[q];
-      const int s = stride[q];
-      const double* yr = y + blk[q] * B;
-      const __m256d lo = _mm256_loadu_pd(yr), hi = _mm256_and_pd(_mm256_loadu_pd(yr + kHi), mask);
-#pragma GCC unroll 8
-      for (int c = 0; c < B; ++c) {
-        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s), lo, acc[c]);
-        acc[c] = _mm256_fmadd_pd(_mm256_loadu_pd(A + c * s + kHi), hi, acc[c]);
-      }
-    }
-#pragma GCC unroll 8
-    for (int c = 0; c < B; ++c) t[c] -= hsum(acc[c]);
+    transpose_sum(
+        count,
+        [&](int q, const double** A, int* s, const double** yr) {
+          *A = values + off[q];
+          *s = stride[q];
+          *yr = y + blk[q] * B;
+        },
+        t);
   }
 };
 #endif
