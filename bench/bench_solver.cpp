@@ -15,10 +15,17 @@
 // cost / Ceres' − 1; reach_* against the Ceres row with the same damping and, for the
 // low-damping rows, reach_default_* against Ceres' defaults. Run and tabulate: see BENCHMARKS.md.
 //
+//   Sim3Drift_Paired/<keyframes>/<fresh_memory>
+//                                  the drift target against the host's noise: Ceres' defaults and
+//                                  our accelerated low-damping LM alternately, GEODRIFT_BENCH_PAIRS
+//                                  rounds (default 5), the median of the per-round ratios; with
+//                                  fresh_memory:1 ours first-touches all its memory every round
+//
 // GEODRIFT_BENCH_DRIFT_SEED=<seed> generates the drift graph from another seed (default 7, the
 // seed of every other problem); the JSON context records it as drift_seed.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -26,6 +33,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "geodrift/io/g2o.hpp"
 #include "geodrift/solver/levenberg_marquardt.hpp"
@@ -107,12 +115,20 @@ double now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-/// Runs `solve` (returns the summary) once per benchmark iteration, with `make` (untimed)
-/// building a fresh problem from the start values before each solve.
 /// Time-to-reach rule of the target: the first record of our trace whose cost is
 /// ≤ (1 + kReachTolerance) × Ceres' final cost from the same start in the same run.
 constexpr double kReachTolerance = 1e-3;
 
+/// The first record of `s`'s trace at or below (1 + kReachTolerance)·cost, or null.
+const solver::IterationRecord* first_reach(const solver::Summary& s, double cost) {
+  const double target = (1.0 + kReachTolerance) * cost;
+  for (const solver::IterationRecord& r : s.trace)
+    if (r.cost <= target) return &r;
+  return nullptr;
+}
+
+/// Runs `solve` (returns the summary) once per benchmark iteration, with `make` (untimed)
+/// building a fresh problem from the start values before each solve.
 template <typename Make, typename Solve>
 void run_ours(benchmark::State& state, const std::string& key, Make make, Solve solve) {
   solver::Summary s;
@@ -151,16 +167,12 @@ void run_ours(benchmark::State& state, const std::string& key, Make make, Solve 
     state.counters["ceres_ratio"] = it->second.seconds / mean;
     state.counters["ceres_ratio_cpu"] = it->second.cpu_seconds / s.time_total_cpu;
     state.counters["cost_vs_ceres"] = s.final_cost / it->second.final_cost - 1.0;
-    const double target = (1.0 + kReachTolerance) * it->second.final_cost;
-    for (const solver::IterationRecord& r : s.trace) {
-      if (r.cost <= target) {
-        state.counters["reach_iterations"] = r.iteration;
-        state.counters["reach_ms"] = 1e3 * r.time_wall;
-        state.counters["reach_cpu_ms"] = 1e3 * r.time_cpu;
-        state.counters["reach_ratio"] = it->second.seconds / r.time_wall;
-        state.counters["reach_ratio_cpu"] = it->second.cpu_seconds / r.time_cpu;
-        break;
-      }
+    if (const solver::IterationRecord* r = first_reach(s, it->second.final_cost)) {
+      state.counters["reach_iterations"] = r->iteration;
+      state.counters["reach_ms"] = 1e3 * r->time_wall;
+      state.counters["reach_cpu_ms"] = 1e3 * r->time_cpu;
+      state.counters["reach_ratio"] = it->second.seconds / r->time_wall;
+      state.counters["reach_ratio_cpu"] = it->second.cpu_seconds / r->time_cpu;
     }
   }
   // Low-damping rows also against Ceres' defaults (same problem, key without "-low-damping"):
@@ -171,14 +183,10 @@ void run_ours(benchmark::State& state, const std::string& key, Make make, Solve 
                        ? ceres_results().end()
                        : ceres_results().find(key.substr(0, at) + key.substr(at + low.size()));
   if (def != ceres_results().end()) {
-    const double target = (1.0 + kReachTolerance) * def->second.final_cost;
-    for (const solver::IterationRecord& r : s.trace) {
-      if (r.cost <= target) {
-        state.counters["reach_default_iterations"] = r.iteration;
-        state.counters["reach_default_cpu_ms"] = 1e3 * r.time_cpu;
-        state.counters["reach_default_ratio_cpu"] = def->second.cpu_seconds / r.time_cpu;
-        break;
-      }
+    if (const solver::IterationRecord* r = first_reach(s, def->second.final_cost)) {
+      state.counters["reach_default_iterations"] = r->iteration;
+      state.counters["reach_default_cpu_ms"] = 1e3 * r->time_cpu;
+      state.counters["reach_default_ratio_cpu"] = def->second.cpu_seconds / r->time_cpu;
     }
   }
   state.SetLabel(s.linear_solver + ": " + solver::to_string(s.termination));
@@ -387,6 +395,104 @@ void BM_Sim3Drift_CeresLowDamping(benchmark::State& state) {
       [&] { return std::make_unique<gb::CeresDriftGraph>(drift(n), drift(n).initial); }, o);
 }
 #endif
+// ---- paired rounds: the drift target against the host's noise --------------------------------
+/// Rounds per BM_Sim3Drift_Paired case: GEODRIFT_BENCH_PAIRS (checked in main), default 5.
+int drift_pairs() {
+  const char* s = std::getenv("GEODRIFT_BENCH_PAIRS");
+  return s ? std::atoi(s) : 5;
+}
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+#if GEODRIFT_HAVE_CERES
+/// The drift target measured so that the host's noise hits both sides alike: `pairs`
+/// rounds, each one Ceres solve with its defaults (to its convergence) and one of our
+/// accelerated low-damping solves (accel_options) back to back on fresh problems from the same
+/// start, the order alternating between rounds. Per round, ratio = Ceres' CPU time to
+/// convergence / our CPU time to reach that round's Ceres final cost (kReachTolerance).
+/// Counters: median, min and max of the per-round ratios; medians of both CPU times and of our
+/// iterations to reach; reached_all = 0 if a round of ours never got there (its ratio is 0).
+/// fresh_memory = 1: the solver's kept large-array mappings are released before each of our
+/// solves (release_large_array_cache()), so every solve first-touches all of its memory as in a
+/// fresh process; 0: they are reused from the previous round, as by a user's repeated solves.
+void BM_Sim3Drift_Paired(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const bool fresh = state.range(1) != 0;
+  const int pairs = drift_pairs();
+  const ceres::Solver::Options co =
+      gb::ceres_lm_options(ceres::SPARSE_NORMAL_CHOLESKY, 1, kMaxIterations, kFunctionTolerance,
+                           kGradientTolerance, kParameterTolerance);
+  const solver::Options oo = accel_options(solver::LinearSolverType::kAuto, 1, kLowDampingLambda);
+  std::vector<double> ratio, ceres_cpu, reach_cpu, reach_iterations;
+  bool reached_all = true, ceres_converged_all = true;
+  double ceres_cost = 0.0, our_cost = 0.0;
+  for (auto _ : state) {
+    ratio.clear();
+    ceres_cpu.clear();
+    reach_cpu.clear();
+    reach_iterations.clear();
+    for (int round = 0; round < pairs; ++round) {
+      ceres::Solver::Summary cs;
+      solver::Summary os;
+      double ceres_seconds = 0.0;
+      auto run_ceres_once = [&] {
+        auto problem = std::make_unique<gb::CeresDriftGraph>(drift(n), drift(n).initial);
+        const std::clock_t c0 = std::clock();
+        ceres::Solve(co, problem->problem.get(), &cs);
+        ceres_seconds = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
+      };
+      auto run_ours_once = [&] {
+        if (fresh) solver::release_large_array_cache();
+        gb::OurDriftGraph problem(drift(n));
+        solver::LevenbergMarquardt lm(oo);
+        os = lm.solve(&problem.problem);
+      };
+      if (round % 2 == 0) {
+        run_ceres_once();
+        run_ours_once();
+      } else {
+        run_ours_once();
+        run_ceres_once();
+      }
+      ceres_converged_all = ceres_converged_all && cs.termination_type == ceres::CONVERGENCE;
+      ceres_cost = cs.final_cost;
+      our_cost = os.final_cost;
+      ceres_cpu.push_back(1e3 * ceres_seconds);
+      if (const solver::IterationRecord* r = first_reach(os, cs.final_cost)) {
+        reach_cpu.push_back(1e3 * r->time_cpu);
+        reach_iterations.push_back(r->iteration);
+        ratio.push_back(ceres_seconds / r->time_cpu);
+      } else {
+        reached_all = false;
+        ratio.push_back(0.0);
+      }
+    }
+    state.SetIterationTime(1e-3 * median(reach_cpu));
+  }
+  state.counters["pairs"] = pairs;
+  state.counters["ratio_median"] = median(ratio);
+  state.counters["ratio_min"] = *std::min_element(ratio.begin(), ratio.end());
+  state.counters["ratio_max"] = *std::max_element(ratio.begin(), ratio.end());
+  state.counters["ceres_cpu_ms_median"] = median(ceres_cpu);
+  state.counters["reach_cpu_ms_median"] = median(reach_cpu);
+  state.counters["reach_iterations_median"] = median(reach_iterations);
+  state.counters["ceres_final_cost"] = ceres_cost;
+  state.counters["final_cost"] = our_cost;
+  state.counters["reached_all"] = reached_all ? 1 : 0;
+  state.counters["ceres_converged_all"] = ceres_converged_all ? 1 : 0;
+  std::string ratios;
+  for (double r : ratio) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%s%.2f", ratios.empty() ? "" : " ", r);
+    ratios += buf;
+  }
+  state.SetLabel("ratios " + ratios);
+}
+#endif
 void BM_Se3Graph_OursAccel(benchmark::State& state) {
   const int g = static_cast<int>(state.range(0)), threads = static_cast<int>(state.range(1));
   run_ours(
@@ -538,6 +644,17 @@ BENCHMARK(BM_Sim3Drift_OursAccelLowDampingCholmod)
     ->UseManualTime()
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
+#if GEODRIFT_HAVE_CERES
+BENCHMARK(BM_Sim3Drift_Paired)
+    ->Args({10000, 1})
+    ->Args({10000, 0})
+    ->Args({50000, 1})
+    ->Args({50000, 0})
+    ->ArgNames({"keyframes", "fresh_memory"})
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+#endif
 BENCHMARK(BM_Linearize_Sim3Drift)->Arg(10000)->ArgName("keyframes")->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Floor_Sim3Drift)
     ->Arg(1000)
@@ -580,6 +697,15 @@ int main(int argc, char** argv) {
                    "bench_solver: GEODRIFT_BENCH_DRIFT_SEED must be a decimal integer in "
                    "0..999999999, got '%s'\n",
                    s);
+      return 2;
+    }
+  }
+  if (const char* s = std::getenv("GEODRIFT_BENCH_PAIRS")) {
+    const std::string v(s);
+    if (v.empty() || v.size() > 3 || v.find_first_not_of("0123456789") != std::string::npos ||
+        std::atoi(s) < 1) {
+      std::fprintf(
+          stderr, "bench_solver: GEODRIFT_BENCH_PAIRS must be an integer in 1..999, got '%s'\n", s);
       return 2;
     }
   }
