@@ -246,6 +246,27 @@ TEST_CASE("Block Cholesky: not positive definite or NaN is a status, and it reco
   CHECK((m.H->to_dense() * x - b).norm() < 1e-9 * b.norm());
 }
 
+TEST_CASE("Block Cholesky refuses a matrix of another pattern than the analysed one",
+          "[solver][block_cholesky]") {
+  // Same size, one more coupling: the factor (in place or not) would read H's blocks at the
+  // analysed offsets, so it is a fatal status, not a factorisation of the wrong values.
+  RandomSpd m(20, 7, chain(20, 2), 4), other(20, 7, chain(20, 3), 4);
+  BlockCholeskySolver bc;
+  REQUIRE(bc.analyze(m.s) == LinearSolverStatus::kSuccess);
+  REQUIRE(bc.in_place());
+  Eigen::VectorXd b = Eigen::VectorXd::Ones(m.s.num_cols()), x(m.s.num_cols());
+  CHECK(bc.factorize(*other.H) == LinearSolverStatus::kFatal);
+  CHECK_THAT(bc.message(), Catch::Contains("pattern differs"));
+  bool overwritten = true;
+  CHECK(bc.factorize_and_solve_in_place(other.H.get(), b.data(), x.data(), &overwritten) ==
+        LinearSolverStatus::kFatal);
+  CHECK_FALSE(overwritten);
+  CHECK(bc.solve(b.data(), x.data()) == LinearSolverStatus::kFatal);
+  REQUIRE(bc.factorize_and_solve_in_place(m.H.get(), b.data(), x.data(), &overwritten) ==
+          LinearSolverStatus::kSuccess);
+  CHECK(overwritten);
+}
+
 TEST_CASE("Block Cholesky rejects structures it cannot factor", "[solver][block_cholesky]") {
   solver::BlockStructure mixed;
   mixed.build({7, 7, 3}, {{0, 1}, {1, 2}});

@@ -545,6 +545,8 @@ class BlockCholeskySolver final : public LinearSolver {
     factor_->setup(&sym_);
     factorized_ = false;
     n_ = s.num_cols();
+    nb_ = s.num_blocks();
+    nvalues_ = s.num_values();
     return true;
   }
 
@@ -610,8 +612,9 @@ class BlockCholeskySolver final : public LinearSolver {
       message_ = "block Cholesky: factorize() before analyze()";
       return LinearSolverStatus::kFatal;
     }
-    if (H.rows() != n_) {
-      message_ = "block Cholesky: matrix size differs from the analysed one";
+    if (H.rows() != n_ || H.structure().num_blocks() != nb_ ||
+        H.structure().num_values() != nvalues_) {
+      message_ = "block Cholesky: matrix size or pattern differs from the analysed one";
       return LinearSolverStatus::kFatal;
     }
     return LinearSolverStatus::kSuccess;
@@ -698,8 +701,8 @@ class BlockCholeskySolver final : public LinearSolver {
   }
 
   Ordering ordering_;
-  int B_ = 0, n_ = 0;
-  bool factorized_ = false;  ///< L holds the factor of the last factorize()
+  int B_ = 0, n_ = 0, nb_ = 0, nvalues_ = 0;  ///< size, blocks and values of the analysed H
+  bool factorized_ = false;                   ///< L holds the factor of the last factorize()
   detail::BlockSymbolic sym_;
   std::unique_ptr<detail::BlockFactorBase> factor_;
 };
