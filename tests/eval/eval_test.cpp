@@ -1,9 +1,12 @@
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
+#include "geodrift/eval/associate.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/eval/scale_factor.hpp"
 #include "geodrift/eval/umeyama.hpp"
@@ -175,4 +178,158 @@ TEST_CASE("Scale factor along the path and windowed scale statistics", "[eval]")
   CHECK(st.sd == Approx(0.2));
   // Steps: 0 except one jump of 0.4 -> SD of {0 x8, 0.4} = 0.4·sqrt(8)/9.
   CHECK(st.step_sd == Approx(0.4 * std::sqrt(8.0) / 9.0));
+}
+
+namespace {
+/// Ground truth at 100 Hz from t0: n stamps.
+std::vector<double> stamps_100hz(double t0, int n) {
+  std::vector<double> t(n);
+  for (int i = 0; i < n; ++i) t[i] = t0 + 0.01 * i;
+  return t;
+}
+}  // namespace
+
+TEST_CASE("Time association pairs exact and jittered stamps with the nearest ground truth",
+          "[eval][associate]") {
+  const std::vector<double> gt = stamps_100hz(1000.0, 300);
+  SECTION("exact matches, every 3rd ground-truth pose") {
+    std::vector<double> res;
+    for (int i = 0; i < 300; i += 3) res.push_back(gt[i]);
+    const eval::Association a = eval::associate_by_time(res, gt);
+    REQUIRE(a.matched() == 100);
+    CHECK(a.unmatched() == 0);
+    for (std::size_t k = 0; k < a.matched(); ++k) {
+      CHECK(a.result_index[k] == k);
+      CHECK(a.gt_index[k] == 3 * k);
+    }
+    CHECK(a.max_abs_time_diff_s() == 0.0);
+  }
+  SECTION("jitter of up to 4 ms picks the intended pose (seeded)") {
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<double> jitter(-0.004, 0.004);
+    std::vector<double> res;
+    std::vector<double> applied;
+    for (int i = 0; i < 300; i += 3) {
+      applied.push_back(jitter(rng));
+      res.push_back(gt[i] + applied.back());
+    }
+    const eval::Association a = eval::associate_by_time(res, gt);
+    REQUIRE(a.matched() == 100);
+    for (std::size_t k = 0; k < a.matched(); ++k) {
+      INFO("k " << k << " jitter " << applied[k]);
+      CHECK(a.gt_index[k] == 3 * k);
+      CHECK(a.time_diff_s[k] == Approx(-applied[k]).margin(1e-9));
+    }
+    CHECK(a.max_abs_time_diff_s() <= 0.004 + 1e-9);
+  }
+  SECTION("beyond the tolerance is unmatched; a tolerance of 0 keeps only exact stamps") {
+    // gt is 100 Hz: stamps 1000.00, 1000.01, ...; a result 25 ms past the last gt pose and one
+    // 20 ms before the first are out of reach of 10 ms.
+    const std::vector<double> res = {999.98, gt[10], gt[20] + 0.003, gt.back() + 0.025};
+    const eval::Association a = eval::associate_by_time(res, gt);
+    REQUIRE(a.matched() == 2);
+    CHECK(a.result_index == std::vector<std::size_t>{1, 2});
+    CHECK(a.gt_index == std::vector<std::size_t>{10, 20});
+    CHECK(a.unmatched_result == std::vector<std::size_t>{0, 3});
+    CHECK(a.lost_to_closer == 0);
+    eval::TimeAssociationOptions exact;
+    exact.max_time_diff_s = 0.0;
+    const eval::Association b = eval::associate_by_time(res, gt, exact);
+    CHECK(b.result_index == std::vector<std::size_t>{1});
+    // A wider tolerance reaches the first one (20 ms before gt[0]).
+    eval::TimeAssociationOptions wide;
+    wide.max_time_diff_s = 0.03;
+    CHECK(eval::associate_by_time(res, gt, wide).matched() == 4);
+  }
+}
+
+TEST_CASE("Time association applies the offset to the result's stamps", "[eval][associate]") {
+  const std::vector<double> gt = stamps_100hz(50.0, 200);
+  // The result's clock runs 10 s behind, plus 2 ms: without the offset every result stamp lies
+  // before the ground truth's first one and nothing is within 10 ms.
+  std::vector<double> res;
+  for (int i = 0; i < 200; i += 4) res.push_back(gt[i] - 10.002);
+  const eval::Association none = eval::associate_by_time(res, gt);
+  CHECK(none.matched() == 0);
+  CHECK(none.unmatched() == 50);
+  eval::TimeAssociationOptions o;
+  o.time_offset_s = 10.0;
+  const eval::Association a = eval::associate_by_time(res, gt, o);
+  REQUIRE(a.matched() == 50);
+  for (std::size_t k = 0; k < 50; ++k) {
+    CHECK(a.result_index[k] == k);
+    CHECK(a.gt_index[k] == 4 * k);
+    CHECK(a.time_diff_s[k] == Approx(0.002).margin(1e-9));
+  }
+}
+
+TEST_CASE("Time association uses each ground-truth pose at most once, keeping the nearest",
+          "[eval][associate]") {
+  // Ground truth at 10 Hz (0 .. 1.9 s), result at 100 Hz (0.001 .. 1.901 s), tolerance 50 ms:
+  // every result pose has a gt pose within reach, about ten share each one, and only the one
+  // 1 ms after it keeps it.
+  std::vector<double> gt, res;
+  for (int j = 0; j < 20; ++j) gt.push_back(0.1 * j);
+  for (int i = 0; i <= 190; ++i) res.push_back(0.01 * i + 0.001);
+  eval::TimeAssociationOptions o;
+  o.max_time_diff_s = 0.05;
+  const eval::Association a = eval::associate_by_time(res, gt, o);
+  REQUIRE(a.matched() == 20);
+  CHECK(a.unmatched() == 171);
+  CHECK(a.lost_to_closer == 171);
+  for (std::size_t k = 0; k < 20; ++k) {
+    CHECK(a.gt_index[k] == k);
+    CHECK(a.result_index[k] == 10 * k);
+    CHECK(a.time_diff_s[k] == Approx(-0.001).margin(1e-9));
+  }
+  // The pairs increase in both indices, gt indices are unique.
+  for (std::size_t k = 1; k < a.matched(); ++k) {
+    CHECK(a.result_index[k] > a.result_index[k - 1]);
+    CHECK(a.gt_index[k] > a.gt_index[k - 1]);
+  }
+  // A tie in distance to the shared gt pose goes to the earlier result pose; an exact midpoint
+  // between two gt poses goes to the earlier gt pose.
+  // (Dyadic stamps, so the two distances are exactly equal.)
+  const eval::Association tie = eval::associate_by_time({0.75, 1.25}, {1.0, 3.0}, {0.5, 0.0});
+  CHECK(tie.result_index == std::vector<std::size_t>{0});
+  CHECK(tie.lost_to_closer == 1);
+  const eval::Association mid = eval::associate_by_time({1.5}, {1.0, 2.0}, {0.5, 0.0});
+  CHECK(mid.gt_index == std::vector<std::size_t>{0});
+}
+
+TEST_CASE("Time association of empty inputs and invalid input", "[eval][associate]") {
+  const std::vector<double> gt = stamps_100hz(0.0, 10);
+  CHECK(eval::associate_by_time({}, gt).matched() == 0);
+  const eval::Association a = eval::associate_by_time({0.0, 0.05}, {});
+  CHECK(a.matched() == 0);
+  CHECK(a.unmatched_result == std::vector<std::size_t>{0, 1});
+  CHECK(eval::associate_by_time({}, {}).unmatched() == 0);
+
+  const auto throws_with = [](const std::vector<double>& r, const std::vector<double>& g,
+                              const eval::TimeAssociationOptions& o, const std::string& what) {
+    try {
+      eval::associate_by_time(r, g, o);
+      FAIL("no exception; expected: " << what);
+    } catch (const InvalidArgument& e) {
+      INFO(e.what());
+      CHECK(std::string(e.what()).find(what) != std::string::npos);
+    }
+  };
+  throws_with({0.0, 0.02, 0.01}, gt, {}, "result timestamp 2 (0.01 s) does not increase");
+  throws_with({0.0, 0.02}, {0.0, 0.0}, {}, "ground-truth timestamp 1 (0 s) does not increase");
+  throws_with({0.0, std::nan("")}, gt, {}, "result timestamp 1 is not finite");
+  throws_with({0.0}, {std::nan(""), 1.0}, {}, "ground-truth timestamp 0 is not finite");
+  throws_with({0.0}, gt, {-0.001, 0.0}, "max_time_diff_s -0.001");
+  throws_with({0.0}, gt, {std::numeric_limits<double>::infinity(), 0.0}, "max_time_diff_s");
+  throws_with({0.0}, gt, {0.01, std::nan("")}, "time_offset_s");
+}
+
+TEST_CASE("Frame association pairs equal frame numbers", "[eval][associate]") {
+  const eval::Association a = eval::associate_by_frame({0, 3, 6, 9, 12}, {0, 1, 2, 3, 4, 5, 6, 7});
+  CHECK(a.result_index == std::vector<std::size_t>{0, 1, 2});
+  CHECK(a.gt_index == std::vector<std::size_t>{0, 3, 6});
+  CHECK(a.unmatched_result == std::vector<std::size_t>{3, 4});
+  CHECK(a.max_abs_time_diff_s() == 0.0);
+  CHECK_THROWS_AS(eval::associate_by_frame({0, 2, 2}, {0, 1, 2}), InvalidArgument);
+  CHECK_THROWS_AS(eval::associate_by_frame({0}, {3, 1}), InvalidArgument);
 }
