@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -351,4 +353,199 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
   while (std::getline(tk, line)) poses += !line.empty() && line[0] != '#';
   CHECK(rows == poses);
   CHECK(interpolated > poses / 2);
+}
+
+namespace {
+
+/// Camera centre in W (metres) of a known path at time s seconds after its start: a gentle S
+/// curve at 5 m/s with a small height oscillation.
+Eigen::Vector3d known_path(double s) {
+  return Eigen::Vector3d(20.0 * std::sin(0.1 * s), 5.0 * s, 0.2 * std::sin(0.7 * s));
+}
+
+/// One TUM line "t x y z qx qy qz qw": camera yawed by 0.1·s about W's z (up).
+std::string tum_line(double t, const Eigen::Vector3d& c, double s) {
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.1 * s, Eigen::Vector3d::UnitZ()));
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(6) << t << std::setprecision(12) << ' ' << c.x() << ' '
+     << c.y() << ' ' << c.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << q.w()
+     << "\n";
+  return os.str();
+}
+
+}  // namespace
+
+TEST_CASE("eval associates a TUM keyframe result with 100 Hz ground truth by timestamp",
+          "[cli][eval]") {
+  geodrift::test::TempDir t;
+  // Ground truth: 10 s at 100 Hz from a EuRoC-like epoch, with a dropout of poses 496..524
+  // (0.29 s without ground truth).
+  const double t0 = 1403636579.763555;
+  const int n_gt = 1001;
+  const auto gt_kept = [](int i) { return i < 496 || i > 524; };
+  std::string gt_tum = "# ground truth, W, metres\n", gt_kitti, gt_times;
+  for (int i = 0; i < n_gt; ++i) {
+    if (!gt_kept(i)) continue;
+    const double s = 0.01 * i;
+    gt_tum += tum_line(t0 + s, known_path(s), s);
+    // The same poses as KITTI lines (camera -> world [R | t]) and a times.txt.
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.1 * s, Eigen::Vector3d::UnitZ()).matrix();
+    const Eigen::Vector3d c = known_path(s);
+    std::ostringstream k;
+    k << std::setprecision(12);
+    for (int r = 0; r < 3; ++r)
+      k << R(r, 0) << ' ' << R(r, 1) << ' ' << R(r, 2) << ' ' << c(r) << (r < 2 ? ' ' : '\n');
+    gt_kitti += k.str();
+    std::ostringstream tt;
+    tt << std::fixed << std::setprecision(6) << t0 + s << "\n";
+    gt_times += tt.str();
+  }
+  const std::string gt = t.write("gt_tum.txt", gt_tum);
+  // Result: every 3rd ground-truth pose (ORB-SLAM-like KeyFrameTrajectory.txt), timestamps
+  // jittered by up to ±4 ms (seeded), positions off by a constant (0.3, 0.4, 0.2) m: the 2D
+  // error of every matched keyframe is exactly 0.5 m. Keyframes 498..522 fall in the dropout
+  // (>= 26 ms from any ground truth), and one more pose lies 0.5 s after the ground truth ends.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.004, 0.004);
+  const Eigen::Vector3d offset(0.3, 0.4, 0.2);
+  std::string res_tum = "# keyframes\n";
+  int n_res = 0, in_dropout = 0;
+  for (int i = 0; i < n_gt; i += 3, ++n_res) {
+    const double s = 0.01 * i;
+    res_tum += tum_line(t0 + s + jitter(rng), known_path(s) + offset, s);
+    in_dropout += gt_kept(i) ? 0 : 1;
+  }
+  res_tum += tum_line(t0 + 10.5, known_path(10.5) + offset, 10.5);
+  ++n_res;
+  REQUIRE(n_res == 335);
+  REQUIRE(in_dropout == 9);
+  const std::string res = t.write("KeyFrameTrajectory.txt", res_tum);
+  const std::string base = "eval --result " + res + " --ground-truth " + gt;
+
+  SECTION("auto picks time association; mean 2D error 0.5 m over the 325 matched keyframes") {
+    const Run r = run(base + " --json");
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(r.output.find("\"method\": \"time\"") != std::string::npos);
+    CHECK(json_numbers(r.output, "matched") == std::vector<double>{325});
+    CHECK(json_numbers(r.output, "unmatched") == std::vector<double>{10});
+    CHECK(json_numbers(r.output, "unmatched_lost_to_closer") == std::vector<double>{0});
+    CHECK(json_numbers(r.output, "result_poses") == std::vector<double>{335});
+    CHECK(json_numbers(r.output, "ground_truth_poses") == std::vector<double>{n_gt - 29});
+    CHECK(json_numbers(r.output, "max_time_diff_s") == std::vector<double>{0.01});
+    REQUIRE(json_numbers(r.output, "max_abs_time_diff_s").size() == 1);
+    CHECK(json_numbers(r.output, "max_abs_time_diff_s")[0] <= 0.004 + 1e-6);
+    CHECK(json_numbers(r.output, "keyframes_evaluated") == std::vector<double>{325});
+    CHECK(mean_2d(r.output) == Approx(0.5).margin(1e-6));
+    // The "max" of error_2d is the 3rd number after "error_2d": all errors are 0.5.
+    const std::string e2d = r.output.substr(r.output.find("\"error_2d\""));
+    CHECK(json_numbers(e2d, "max")[0] == Approx(0.5).margin(1e-6));
+    CHECK(json_numbers(e2d, "sd")[0] == Approx(0.0).margin(1e-6));
+    // A constant offset is a similarity: the global Sim3 error vanishes.
+    const std::string g = r.output.substr(r.output.find("\"global_sim3_error_2d\""));
+    CHECK(json_numbers(g, "mean")[0] == Approx(0.0).margin(1e-6));
+    // ATE without alignment: the 3D offset, |(0.3, 0.4, 0.2)|.
+    CHECK(json_numbers(r.output, "ate_rmse")[0] == Approx(std::sqrt(0.29)).margin(1e-6));
+  }
+  SECTION("the text output states the association and the counts") {
+    const Run r = run(base);
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(r.output.find("association                by time: nearest ground-truth pose within "
+                        "0.01 s") != std::string::npos);
+    CHECK(r.output.find("matched poses              325 of 335 (10 unmatched") !=
+          std::string::npos);
+    CHECK(r.output.find("Ave 0.500") != std::string::npos);
+  }
+  SECTION("a KITTI ground truth with --gt-times associates the same way") {
+    const std::string k = t.write("gt_kitti.txt", gt_kitti);
+    const std::string times = t.write("times.txt", gt_times);
+    const Run r =
+        run("eval --json --result " + res + " --ground-truth " + k + " --gt-times " + times);
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(r.output.find("\"method\": \"time\"") != std::string::npos);
+    CHECK(json_numbers(r.output, "matched") == std::vector<double>{325});
+    CHECK(mean_2d(r.output) == Approx(0.5).margin(1e-6));
+    // Without the times, auto falls back to frame (line order): the wrong poses are paired.
+    const Run f = run("eval --json --result " + res + " --ground-truth " + k);
+    INFO(f.output);
+    REQUIRE(f.code == 0);
+    CHECK(f.output.find("\"method\": \"frame\"") != std::string::npos);
+    CHECK(mean_2d(f.output) > 5.0);
+    // A times file with a repeated stamp is an error naming the file and line.
+    std::string bad = gt_times;
+    const auto second = bad.find('\n') + 1;
+    bad.replace(second, bad.find('\n', second) - second, bad.substr(0, bad.find('\n')));
+    const Run b = run("eval --result " + res + " --ground-truth " + k + " --gt-times " +
+                      t.write("bad_times.txt", bad));
+    INFO(b.output);
+    CHECK(b.code == 1);
+    CHECK(b.output.find("bad_times.txt:2: timestamp") != std::string::npos);
+    CHECK(b.output.find("does not increase") != std::string::npos);
+  }
+  SECTION("each ground-truth pose is used once; the tolerance decides; nothing matched fails") {
+    // 50 ms reaches from keyframes 498 and 522 (30 ms into the dropout) to ground-truth poses
+    // 495 and 525, but keyframes 495 and 525 are nearer to those (<= 4 ms) and keep them.
+    const Run r = run(base + " --json --max-time-diff 0.05");
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(json_numbers(r.output, "matched") == std::vector<double>{325});
+    CHECK(json_numbers(r.output, "unmatched") == std::vector<double>{10});
+    CHECK(json_numbers(r.output, "unmatched_lost_to_closer") == std::vector<double>{2});
+    CHECK(mean_2d(r.output) == Approx(0.5).margin(1e-6));
+    // 0.6 s reaches from the pose 0.5 s after the end to the last ground-truth pose (which no
+    // keyframe took): 326 matched, and that pair's error pulls the mean above 0.5 m.
+    const Run w = run(base + " --json --max-time-diff 0.6");
+    INFO(w.output);
+    REQUIRE(w.code == 0);
+    CHECK(json_numbers(w.output, "matched") == std::vector<double>{326});
+    CHECK(json_numbers(w.output, "unmatched_lost_to_closer") == std::vector<double>{9});
+    CHECK(json_numbers(w.output, "max_abs_time_diff_s")[0] == Approx(0.5).margin(1e-5));
+    CHECK(mean_2d(w.output) > 0.5 + 1e-3);
+    const Run n = run(base + " --time-offset 100");
+    INFO(n.output);
+    CHECK(n.code == 1);
+    CHECK(n.output.find("only 0 keyframes of " + res) != std::string::npos);
+    CHECK(n.output.find(gt) != std::string::npos);
+    CHECK(n.output.find("within 0.01 s") != std::string::npos);
+  }
+  SECTION("forced frame association pairs by line order") {
+    const Run r = run(base + " --json --associate frame");
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(r.output.find("\"method\": \"frame\"") != std::string::npos);
+    CHECK(json_numbers(r.output, "matched") == std::vector<double>{335});
+    CHECK(mean_2d(r.output) > 5.0);
+    const Run bad = run(base + " --associate frame --max-time-diff 0.02");
+    CHECK(bad.code == 2);
+    CHECK(bad.output.find("time association only") != std::string::npos);
+  }
+  SECTION("bad options and timestamps are clear errors") {
+    for (const char* opt : {"--max-time-diff -0.001", "--max-time-diff nan", "--time-offset inf",
+                            "--associate nearest"}) {
+      const Run r = run(base + " " + opt);
+      INFO(opt << ": " << r.output);
+      CHECK(r.code == 2);
+    }
+    // A repeated timestamp in the result (line 3 repeats line 2's).
+    std::istringstream in(res_tum);
+    std::string l1, l2, l3, rest;
+    std::getline(in, l1);
+    std::getline(in, l2);
+    std::getline(in, l3);
+    const std::string dup =
+        l1 + "\n" + l2 + "\n" + l2.substr(0, l2.find(' ')) + l3.substr(l3.find(' ')) + "\n";
+    const Run r = run("eval --result " + t.write("dup.txt", dup) + " --ground-truth " + gt);
+    INFO(r.output);
+    CHECK(r.code == 1);
+    CHECK(r.output.find("dup.txt:3: timestamp") != std::string::npos);
+    CHECK(r.output.find("does not increase") != std::string::npos);
+    // --associate time with a ground truth that has no timestamps.
+    const std::string k = t.write("gt_kitti.txt", gt_kitti);
+    const Run nt = run("eval --result " + res + " --ground-truth " + k + " --associate time");
+    INFO(nt.output);
+    CHECK(nt.code == 1);
+    CHECK(nt.output.find("gt_kitti.txt has no timestamps") != std::string::npos);
+  }
 }
