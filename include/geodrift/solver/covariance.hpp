@@ -59,18 +59,21 @@
 /// factorisation) and L's memory (Σ overwrites it). Selected off-diagonal pairs whose blocks
 /// are not on L's pattern (far apart in the graph) are the exception: each distinct second
 /// block of such pairs costs one multi-right-hand-side solve with L (before Σ overwrites it).
-/// Work: one linearisation + one factorisation + the recursion from the last column down to
-/// the earliest wanted one in the elimination order. Memory: H, then L (≈ H for chains).
+/// Work: one linearisation + one factorisation + 4 solves (rank test) + the recursion from the
+/// last column down to the earliest wanted one in the elimination order. Memory: H, then L (≈ H for
+/// chains).
 ///
 /// ## Failures
 /// A gauge freedom or an unobservable direction makes H singular. Rounding usually lets the
-/// Cholesky finish with a tiny pivot instead, so each scalar pivot d_c (the variance of the
-/// column's residual after eliminating the columns before it, inverted) is tested against
-/// H's own diagonal: d_c ≤ min_pivot_ratio·H_cc (scale-free, as on a Jacobi-scaled H) is
-/// reported as CovarianceStatus::kRankDeficient naming the parameter block and tangent
-/// coordinate where it showed; nothing is returned (no NaN, no huge numbers). Residual blocks
-/// that cannot be evaluated, or a non-finite H, give kEvaluationFailed. Requesting a constant
-/// block or a pointer that is not a parameter of the problem throws InvalidArgument.
+/// Cholesky finish anyway, with pivots that on long chains are not small enough to tell (about
+/// n²·1e-16 relative), so the rank test (CovarianceOptions::rank_tolerance) bounds the smallest
+/// eigenvalue of the Jacobi-scaled H twice: by the pivots d_c/H_cc during the factorisation,
+/// and by the Rayleigh quotient, computed with H itself, of a vector from a few steps of
+/// inverse iteration (4 solves with the factor). Either at or below the tolerance gives
+/// CovarianceStatus::kRankDeficient with a message (naming the parameter block and tangent
+/// coordinate when a pivot failed); nothing is returned (no NaN, no huge numbers). Residual
+/// blocks that cannot be evaluated, or a non-finite H, give kEvaluationFailed. Requesting a
+/// constant block or a pointer that is not a parameter of the problem throws InvalidArgument.
 
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>
@@ -82,6 +85,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <random>
 #include <sstream>
 #include <string>
 #include <unordered_map>
@@ -120,21 +124,27 @@ inline const char* to_string(CovarianceStatus s) {
 
 /// Options of Covariance.
 struct CovarianceOptions {
-  /// Rank test: H counts as singular when a Cholesky pivot d_c (after the columns eliminated
-  /// before c) satisfies d_c ≤ min_pivot_ratio·H_cc, i.e. when the column keeps less than this
-  /// fraction of its own information once the others are known. Scale-free (the units of the
-  /// column cancel). A free gauge gives ratios at rounding level (≈ 1e-16…1e-13 on chains of
-  /// up to 50k Sim(3) nodes); well-posed pose graphs stay far above (≈ 1e-6 at the weakest
-  /// node of a 50k-keyframe chain with λ1 = 1e5 edges and 1 m anchors every 200 keyframes).
+  /// Rank test on the Jacobi-scaled H̃ = D^-½·H·D^-½ (D = diag H; unit diagonal, so the test
+  /// does not depend on the parameters' units): H counts as singular when its smallest
+  /// eigenvalue λ_min(H̃) ≤ rank_tolerance, as shown by either
+  ///  - a Cholesky pivot d_c ≤ rank_tolerance·H_cc (d_c/H_cc ≥ λ_min(H̃) by interlacing), or
+  ///  - the Rayleigh quotient xᵀH̃x of the vector x that a few steps of inverse iteration with
+  ///    the factor leave (an upper bound of λ_min(H̃), accurate to second order in the error of
+  ///    x, and evaluated with H itself, not its rounded factor).
+  /// Pivots alone cannot tell: with a free gauge, rounding leaves pivot ratios of either sign up
+  /// to ≈ 3e-7 (measured on Sim(3) chains of 3k–20k nodes 3 km from the origin), as large as
+  /// genuine ones of well-posed chains (4e-8 at 50k keyframes, λ1 = 1e5 edges to the next
+  /// neighbour, 1 m anchors every 200). Measured Rayleigh quotients: |·| ≤ 4e-17 with a free
+  /// gauge (chains of 30–20k nodes), ≥ 3.6e-10 on those well-posed chains of 10k–50k keyframes.
   /// Must be in (0, 1).
-  double min_pivot_ratio = 1e-11;
+  double rank_tolerance = 1e-12;
 
   /// @return true if valid; otherwise false and *why (if given) says which option and why.
   bool validate(std::string* why = nullptr) const {
-    if (min_pivot_ratio > 0.0 && min_pivot_ratio < 1.0) return true;
+    if (rank_tolerance > 0.0 && rank_tolerance < 1.0) return true;
     if (why) {
       std::ostringstream os;
-      os << "min_pivot_ratio " << min_pivot_ratio << " is not in (0, 1)";
+      os << "rank_tolerance " << rank_tolerance << " is not in (0, 1)";
       *why = os.str();
     }
     return false;
@@ -143,12 +153,13 @@ struct CovarianceOptions {
 
 /// Time split of the last Covariance::compute() (seconds).
 struct CovarianceTimes {
-  double linearize = 0.0;  ///< Problem::linearize (residuals, Jacobians, H)
-  double analyze = 0.0;    ///< ordering + symbolic factor
-  double factorize = 0.0;  ///< copying H into the block store + numeric Cholesky
-  double solve = 0.0;      ///< off-pattern pairs: multi-right-hand-side solves
-  double inverse = 0.0;    ///< Takahashi recursion + extracting the blocks
-  double total() const { return linearize + analyze + factorize + solve + inverse; }
+  double linearize = 0.0;   ///< Problem::linearize (residuals, Jacobians, H)
+  double analyze = 0.0;     ///< ordering + symbolic factor
+  double factorize = 0.0;   ///< copying H into the block store + numeric Cholesky
+  double rank_check = 0.0;  ///< inverse iteration for the rank test
+  double solve = 0.0;       ///< off-pattern pairs: multi-right-hand-side solves
+  double inverse = 0.0;     ///< Takahashi recursion + extracting the blocks
+  double total() const { return linearize + analyze + factorize + rank_check + solve + inverse; }
 };
 
 namespace detail {
@@ -260,21 +271,9 @@ class CovarianceFactor {
   /// X ← (P·H·Pᵀ)⁻¹·X with the factor (before takahashi()); X has num_cols() rows in
   /// elimination order.
   void solve(Eigen::MatrixXd* X) const {
-    const int nb = sym_.nb;
-    const int* cp = sym_.col_ptr.data();
-    const int* rw = sym_.row.data();
-    for (int j = 0; j < nb; ++j) {  // L·Y = X
-      auto Xj = X->middleRows(start_[j], size_[j]);
-      block(cp[j]).triangularView<Eigen::Lower>().solveInPlace(Xj);
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p)
-        X->middleRows(start_[rw[p]], size_[rw[p]]).noalias() -= block(p) * Xj;
-    }
-    for (int j = nb - 1; j >= 0; --j) {  // Lᵀ·X = Y
-      auto Xj = X->middleRows(start_[j], size_[j]);
-      for (int p = cp[j] + 1; p < cp[j + 1]; ++p)
-        Xj.noalias() -= block(p).transpose() * X->middleRows(start_[rw[p]], size_[rw[p]]);
-      block(cp[j]).transpose().triangularView<Eigen::Upper>().solveInPlace(Xj);
-    }
+    if (uniform_ == 6) return solve_with<6>(X);
+    if (uniform_ == 7) return solve_with<7>(X);
+    solve_with<Eigen::Dynamic>(X);
   }
 
   /// Replaces L by Σ on L's pattern for block columns stop..nb−1 (the recursion runs from the
@@ -340,6 +339,44 @@ class CovarianceFactor {
         for (int k = c + 1; k < n; ++k) v -= x(r, k) * l(k, c);
         x(r, c) = v / l(c, c);
       }
+  }
+
+  template <int B>
+  void solve_with(Eigen::MatrixXd* X) const {
+    using ConstMap = Eigen::Map<const Mat<B>>;
+    const int nb = sym_.nb;
+    const int* cp = sym_.col_ptr.data();
+    const int* rw = sym_.row.data();
+    const double* v = values_.data();
+    const int r = static_cast<int>(X->cols());
+    for (int j = 0; j < nb; ++j) {  // L·Y = X
+      const int nj = B == Eigen::Dynamic ? size_[j] : B;
+      const ConstMap Ljj(v + off_[cp[j]], nj, nj);
+      auto Xj = X->middleRows(start_[j], nj);
+      for (int t = 0; t < r; ++t)
+        for (int c = 0; c < nj; ++c) {
+          double e = Xj(c, t);
+          for (int k = 0; k < c; ++k) e -= Ljj(c, k) * Xj(k, t);
+          Xj(c, t) = e / Ljj(c, c);
+        }
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p)
+        X->middleRows(start_[rw[p]], size_[rw[p]]).noalias() -=
+            ConstMap(v + off_[p], size_[rw[p]], nj) * Xj;
+    }
+    for (int j = nb - 1; j >= 0; --j) {  // Lᵀ·X = Y
+      const int nj = B == Eigen::Dynamic ? size_[j] : B;
+      auto Xj = X->middleRows(start_[j], nj);
+      for (int p = cp[j] + 1; p < cp[j + 1]; ++p)
+        Xj.noalias() -= ConstMap(v + off_[p], size_[rw[p]], nj).transpose() *
+                        X->middleRows(start_[rw[p]], size_[rw[p]]);
+      const ConstMap Ljj(v + off_[cp[j]], nj, nj);
+      for (int t = 0; t < r; ++t)
+        for (int c = nj - 1; c >= 0; --c) {
+          double e = Xj(c, t);
+          for (int k = c + 1; k < nj; ++k) e -= Ljj(k, c) * Xj(k, t);
+          Xj(c, t) = e / Ljj(c, c);
+        }
+    }
   }
 
   template <int B>
@@ -460,14 +497,14 @@ class CovarianceFactor {
   }
 
   BlockSymbolic sym_;
-  int uniform_ = 0;                 ///< common block size, 0 if the sizes differ
-  std::vector<int> size_, start_;   ///< per position: block size, first scalar column
-  std::vector<std::size_t> off_;    ///< per slot of L: offset of its block in values_
-  std::vector<int> rptr_, rcol_;    ///< row lists of L below the diagonal (CSR) ...
-  std::vector<int> rslot_;          ///< ... and the slot of each entry
-  std::vector<int> where_;          ///< factorisation: slot of row i in the current column
-  std::vector<double> values_;      ///< L's blocks (column-major, back to back), then Σ's
-  std::vector<double> scratch_;     ///< takahashi(): A and S of one column
+  int uniform_ = 0;                ///< common block size, 0 if the sizes differ
+  std::vector<int> size_, start_;  ///< per position: block size, first scalar column
+  std::vector<std::size_t> off_;   ///< per slot of L: offset of its block in values_
+  std::vector<int> rptr_, rcol_;   ///< row lists of L below the diagonal (CSR) ...
+  std::vector<int> rslot_;         ///< ... and the slot of each entry
+  std::vector<int> where_;         ///< factorisation: slot of row i in the current column
+  std::vector<double> values_;     ///< L's blocks (column-major, back to back), then Σ's
+  std::vector<double> scratch_;    ///< takahashi(): A and S of one column
 };
 
 }  // namespace detail
@@ -542,10 +579,15 @@ class Covariance {
       if (!factor_.load(H, &hdiag))
         return fail(CovarianceStatus::kEvaluationFailed,
                     "Covariance: the Gauss-Newton matrix H is not finite", why);
+      const int bad = factor_.factorize(hdiag, options_.rank_tolerance, &min_pivot_ratio_);
+      times_.factorize = seconds(t0);
+      if (bad >= 0) return fail(CovarianceStatus::kRankDeficient, rank_message(problem, bad), why);
+      t0 = Clock::now();
+      min_eigenvalue_ = smallest_scaled_eigenvalue(H, hdiag);
+      times_.rank_check = seconds(t0);
+      if (!(min_eigenvalue_ > options_.rank_tolerance))
+        return fail(CovarianceStatus::kRankDeficient, rank_message(problem, -1), why);
     }  // H freed: the factor has its own copy
-    const int bad = factor_.factorize(hdiag, options_.min_pivot_ratio, &min_pivot_ratio_);
-    times_.factorize = seconds(t0);
-    if (bad >= 0) return fail(CovarianceStatus::kRankDeficient, rank_message(problem, bad), why);
 
     const detail::BlockSymbolic& sym = factor_.symbolic();
     // Pairs off L's pattern: Σ_{:,b} = H⁻¹·E_b by one solve per distinct b (before Σ overwrites L).
@@ -603,9 +645,13 @@ class Covariance {
   /// Why the last compute() failed (empty on success).
   const std::string& message() const { return message_; }
   const CovarianceTimes& times() const { return times_; }
-  /// The smallest Cholesky pivot ratio d_c / H_cc of the last factorisation (a cheap
-  /// conditioning indicator; +inf before one). See CovarianceOptions::min_pivot_ratio.
+  /// The smallest Cholesky pivot ratio d_c / H_cc of the last factorisation (+inf before one).
+  /// See CovarianceOptions::rank_tolerance.
   double min_pivot_ratio() const { return min_pivot_ratio_; }
+  /// Upper estimate of the smallest eigenvalue of the Jacobi-scaled H̃ (unit diagonal) from the
+  /// rank test, a conditioning indicator: 1/cond(H̃) ≈ this / λ_max(H̃), λ_max(H̃) ∈ [1, max
+  /// nonzeros per row]. NaN before a successful factorisation.
+  double min_scaled_eigenvalue() const { return min_eigenvalue_; }
 
   /// Whether Σ_xx of state x is available (requested in the last successful compute()).
   bool has_block(const void* x) const { return diagonal_.count(x) > 0; }
@@ -614,10 +660,10 @@ class Covariance {
   /// @throws InvalidArgument unless x was in `blocks` of the last successful compute().
   Eigen::MatrixXd block(const void* x) const {
     const auto it = diagonal_.find(x);
-    GEODRIFT_CHECK(it != diagonal_.end(),
-                   "Covariance::block: no covariance for the state at "
-                       << x << " (not requested, or compute() did not succeed: "
-                       << to_string(status_) << ")");
+    GEODRIFT_CHECK(it != diagonal_.end(), "Covariance::block: no covariance for the state at "
+                                              << x
+                                              << " (not requested, or compute() did not succeed: "
+                                              << to_string(status_) << ")");
     return it->second;
   }
 
@@ -642,6 +688,7 @@ class Covariance {
     message_.clear();
     times_ = CovarianceTimes();
     min_pivot_ratio_ = std::numeric_limits<double>::infinity();
+    min_eigenvalue_ = std::numeric_limits<double>::quiet_NaN();
     diagonal_.clear();
     pairs_.clear();
   }
@@ -656,31 +703,94 @@ class Covariance {
     return false;
   }
 
-  /// Names the parameter block and tangent coordinate of failing scalar column `col`
-  /// (elimination order).
+  /// The rank-deficiency message: the failing pivot's parameter block and tangent coordinate
+  /// (scalar column `col`, elimination order), or with col < 0 the Rayleigh-quotient estimate.
   std::string rank_message(const Problem& problem, int col) const {
-    const detail::BlockSymbolic& sym = factor_.symbolic();
-    int q = 0;
-    while (factor_.start(q + 1) <= col) ++q;
-    const int b = sym.perm[q];
-    const void* state = nullptr;
-    for (const ParameterBlock& pb : problem.parameter_blocks())
-      if (pb.index == b) state = pb.state;
     std::ostringstream os;
-    os << "Covariance: the Gauss-Newton matrix is rank deficient: the pivot of tangent coordinate "
-       << col - factor_.start(q) << " of the state at " << state << " (free block " << b << " of "
-       << sym.nb << ") keeps a fraction " << min_pivot_ratio_ << " <= min_pivot_ratio "
-       << options_.min_pivot_ratio
-       << " of its information once the blocks eliminated before it are known: a free gauge "
-          "(fix one pose with set_constant or add priors) or an unobservable direction";
+    os << "Covariance: the Gauss-Newton matrix is rank deficient (smallest eigenvalue of the "
+          "Jacobi-scaled H <= rank_tolerance "
+       << options_.rank_tolerance << "): ";
+    if (col >= 0) {
+      const detail::BlockSymbolic& sym = factor_.symbolic();
+      int q = 0;
+      while (factor_.start(q + 1) <= col) ++q;
+      const int b = sym.perm[q];
+      const void* state = nullptr;
+      for (const ParameterBlock& pb : problem.parameter_blocks())
+        if (pb.index == b) state = pb.state;
+      os << "the Cholesky pivot of tangent coordinate " << col - factor_.start(q)
+         << " of the state at " << state << " (free block " << b << " of " << sym.nb
+         << ") keeps a fraction " << min_pivot_ratio_
+         << " of its information once the blocks eliminated before it are known";
+    } else {
+      os << "inverse iteration found a direction with Rayleigh quotient " << min_eigenvalue_;
+    }
+    os << "; a free gauge (fix a pose with Problem::set_constant, or add priors) or an "
+          "unobservable direction";
     return os.str();
   }
+
+  /// Upper estimate of λ_min(D^-½·H·D^-½) (see CovarianceOptions::rank_tolerance): inverse
+  /// iteration from a fixed pseudo-random start with the factor, then the Rayleigh quotient with
+  /// H itself (its upper block storage). hdiag: H's diagonal in elimination order.
+  double smallest_scaled_eigenvalue(const BlockSparseMatrix& H,
+                                    const std::vector<double>& hdiag) const {
+    const BlockStructure& s = H.structure();
+    const detail::BlockSymbolic& sym = factor_.symbolic();
+    const int n = s.num_cols();
+    if (n == 0) return std::numeric_limits<double>::infinity();
+    Eigen::VectorXd d(n);  // √H_cc, elimination order
+    for (int c = 0; c < n; ++c) d[c] = std::sqrt(hdiag[static_cast<std::size_t>(c)]);
+    Eigen::MatrixXd x(n, 1);
+    std::mt19937 rng(0x5eed);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    for (int c = 0; c < n; ++c) x(c, 0) = normal(rng);
+    // Each step multiplies the components along H̃'s eigenvectors by 1/λ: a null direction of H
+    // (λ ≈ rounding of the factor) outgrows the others by many orders per step.
+    for (int it = 0; it < kInverseIterations; ++it) {
+      x.col(0) = d.cwiseProduct(x.col(0)) / x.col(0).norm();
+      factor_.solve(&x);
+      x.col(0) = d.cwiseProduct(x.col(0));
+      if (!x.allFinite()) return 0.0;
+    }
+    x /= x.norm();
+    // u = D^-½·x in H's column order; xᵀH̃x = uᵀHu.
+    Eigen::VectorXd u(n), y = Eigen::VectorXd::Zero(n);
+    for (int b = 0; b < s.num_blocks(); ++b) {
+      const int q = sym.inv[b];
+      for (int c = 0; c < s.block_size(b); ++c)
+        u[s.block_col(b) + c] = x(factor_.start(q) + c, 0) / d[factor_.start(q) + c];
+    }
+    const auto& bcp = s.block_col_ptr();
+    const auto& brow = s.block_rows();
+    const auto& boff = s.block_offsets();
+    for (int b = 0; b < s.num_blocks(); ++b)
+      for (int k = bcp[b]; k < bcp[b + 1]; ++k) {
+        const int a = brow[k];
+        const BlockSparseMatrix::ConstBlockMap Hab(H.values() + boff[k], s.block_size(a),
+                                                   s.block_size(b),
+                                                   Eigen::OuterStride<>(s.column_height(b)));
+        const auto ua = u.segment(s.block_col(a), s.block_size(a));
+        const auto ub = u.segment(s.block_col(b), s.block_size(b));
+        if (a == b) {
+          y.segment(s.block_col(b), s.block_size(b)).noalias() +=
+              Hab.selfadjointView<Eigen::Upper>() * ub;
+        } else {
+          y.segment(s.block_col(a), s.block_size(a)).noalias() += Hab * ub;
+          y.segment(s.block_col(b), s.block_size(b)).noalias() += Hab.transpose() * ua;
+        }
+      }
+    return u.dot(y);
+  }
+
+  static constexpr int kInverseIterations = 4;
 
   CovarianceOptions options_;
   CovarianceStatus status_ = CovarianceStatus::kNotComputed;
   std::string message_;
   CovarianceTimes times_;
   double min_pivot_ratio_ = std::numeric_limits<double>::infinity();
+  double min_eigenvalue_ = std::numeric_limits<double>::quiet_NaN();
   detail::CovarianceFactor factor_;
   std::unordered_map<const void*, Eigen::MatrixXd> diagonal_;
   std::map<Pair, Eigen::MatrixXd> pairs_;
