@@ -60,8 +60,11 @@
 /// are not on L's pattern (far apart in the graph) are the exception: each distinct second
 /// block of such pairs costs one multi-right-hand-side solve with L (before Σ overwrites it).
 /// Work: one linearisation + one factorisation + 4 solves (rank test) + the recursion from the
-/// last column down to the earliest wanted one in the elimination order. Memory: H, then L (≈ H for
-/// chains).
+/// last column down to the earliest wanted one in the elimination order. Memory: H and L (≈ H
+/// on chains) at the peak, then L only. Measured (all 7×7 diagonal blocks of a Sim(3) chain, each
+/// keyframe linked to its next 5, 1 m anchors every 200; one core of the project VM, -O2):
+/// 10k keyframes 0.19–0.20 s, 50k keyframes 0.97–1.02 s (linearise 0.15, factorise 0.28,
+/// rank test 0.23, recursion and copies 0.31), against 0.3 s per LM iteration at 50k.
 ///
 /// ## Failures
 /// A gauge freedom or an unobservable direction makes H singular. Rounding usually lets the
