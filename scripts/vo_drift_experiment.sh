@@ -23,7 +23,7 @@ each --scales factor, as (scaled - original) mean 2D error.
 options
   --data DIR          data folder (default /work/vo_data)
   --stretches LIST    development stretches, comma-separated folder names under DATA
-                      (default 02_0000_0899,08_0000_0599)
+                      (default 02_0000_0899,08_0100_0699)
   --holdout           also run the held-out stretch(es) (--holdout-stretches)
   --holdout-stretches LIST   default 08_2000_2599
   --intervals LIST    anchor intervals N in frames (default 100,200,300)
@@ -49,7 +49,7 @@ die() {
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 G=${GEODRIFT:-$here/build/frontends/cli/geodrift}
 DATA=/work/vo_data
-STRETCHES=02_0000_0899,08_0000_0599
+STRETCHES=02_0000_0899,08_0100_0699
 HOLDOUT=0
 HOLDOUT_STRETCHES=08_2000_2599
 INTERVALS=100,200,300
@@ -199,7 +199,8 @@ run_one() { # dir traj model anchors mode gt_w
     --out "$dir" --force)
   [ -n "$model" ] && args+=(--map "$model")
   if ! "$G" "${args[@]}" > "$dir.correct.log" 2>&1; then
-    echo fail
+    # A usage error (e.g. init+ba without a map) means "not applicable", not a failure.
+    if grep -q 'usage error' "$dir.correct.log"; then echo n/a; else echo fail; fi
     return
   fi
   if ! "$G" eval --result "$dir" --ground-truth "$gtw" --json > "$dir.eval.json" 2> "$dir.eval.log"; then
@@ -209,9 +210,9 @@ run_one() { # dir traj model anchors mode gt_w
   json_get "$dir.eval.json" error_2d
 }
 
-fmt() { case "$1" in fail | nan) echo "$1" ;; *) printf '%.2f' "$1" ;; esac; }
+fmt() { case "$1" in fail | nan | n/a) echo "$1" ;; *) printf '%.2f' "$1" ;; esac; }
 diff_cell() { # scaled orig
-  case "$1$2" in *fail* | *nan*) echo "–" ;; *) python3 -c 'import sys; print("%+.3f" % (float(sys.argv[1]) - float(sys.argv[2])))' "$1" "$2" ;; esac
+  case "$1$2" in *fail* | *nan* | *n/a*) echo "–" ;; *) python3 -c 'import sys; print("%+.3f" % (float(sys.argv[1]) - float(sys.argv[2])))' "$1" "$2" ;; esac
 }
 
 IFS=, read -r -a intervals <<< "$INTERVALS"
@@ -251,7 +252,7 @@ for st in ${list//,/ }; do
           d=$w/run_${N}_${mode}_${v}_$s
           r=$(run_one "$d" "$t" "$m" "$w/anchors_$N.csv" "$mode" "$w/gt_w.txt")
           res[$N,$mode,$v,$s]=$r
-          if [ "$r" = fail ]; then
+          if [ "$r" = fail ] || [ "$r" = n/a ]; then
             why=$(cat "$d.correct.log" "$d.eval.log" 2> /dev/null | grep . | tail -n 1 || true)
             why="$st, $mode, ${v/nomap/trajectory only}: ${why:-no message}"
             failures[$why]="${failures[$why]:+${failures[$why]}, }N=$N x$s"
@@ -298,7 +299,7 @@ for st in ${list//,/ }; do
 done
 if [ ${#failures[@]} -gt 0 ]; then
   echo
-  echo "Failed runs (cell 'fail'):"
+  echo "Runs without a number (cell 'fail', or 'n/a' for a usage error: the mode does not apply):"
   echo
   for f in "${!failures[@]}"; do echo "- $f (${failures[$f]})"; done | sort
 fi
