@@ -48,14 +48,28 @@ inputs
                       sigma_m, heading_deg. At least 4 anchors, inside the trajectory's range.
 
 options
-  --mode M            ours (default: INIT + PGO + BA) | init+pgo | init+ba | init | batch
+  --mode M            ours (default: INIT + PGO + BA) | init+pgo | init+ba | init | batch |
+                      piecewise | piecewise3d (the naive baseline: one similarity per segment
+                      between consecutive anchors, 2D in the levelled frame or Sim(3), the last
+                      carried on after the last anchor)
   --origin LAT,LON,H  origin of W (degrees, degrees, ellipsoidal metres); default: first anchor
   --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
                       always one); the others are carried along by their raw relative pose
+  --weights W         pose-graph edge weights: drift (default) | paper. drift: each edge
+                      carries the monocular VO's relative-pose uncertainty over its distance and
+                      turn (docs/correction_model.md), anchors their sigma_m: the result does
+                      not depend on the map's unit. paper: lambda1 = lambda2 = 1e5 on every
+                      Sim(3) component in map units, lambda3 = 1 (Iwami et al.): the result
+                      changes with the map's unit
+  --gate-anchors      test each anchor after INIT against the path the previous ones give
+                      and leave out those that do not fit (named on stderr and in report.json;
+                      INIT's RANSAC outliers too); experimental, off by default: it catches
+                      anchors hundreds of metres off, but at anchor intervals of ~300 m it can
+                      reject correct anchors (docs/correction_model.md)
   --links N           link each keyframe to its N predecessors by relative-pose edges
-                      (default 1, the consecutive chain; measured on simulated KITTI 02 without
-                      a map: 1 link 1.3 m, 2 links 1.9 m, 5 links 9.0 m mean 2D error, as each
-                      edge carries the paper's weight 1e5 and stiffens the graph against anchors)
+                      (default 1, the consecutive chain; the edges of one keyframe overlap, so
+                      more links count the same VO motion several times and stiffen the path
+                      against its anchors)
   --first-window W    from-start (default) | paper: the first window after INIT reaches back to
                       the first keyframe and holds INIT's anchors too (from-start), or spans
                       only the keyframes of its newest 3 anchors (paper; measured on simulated
@@ -182,9 +196,9 @@ double number_option(const Args& args, const std::string& key, double def) {
 int run_correct(int argc, char** argv) {
   const Args args(argc, argv,
                   {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
-                   "keyframe-step", "links", "first-window", "min-window-keyframes",
+                   "keyframe-step", "links", "weights", "first-window", "min-window-keyframes",
                    "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
-                  {"help", "force"});
+                  {"help", "force", "gate-anchors"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -198,6 +212,8 @@ int run_correct(int argc, char** argv) {
   try {
     opt.mode = correction::mode_from_string(args.get("mode", "ours"));
     format = io::parse_trajectory_format(args.get("format", "auto"));
+    if (correction::paper_weights_from_string(args.get("weights", "drift")))
+      opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kPaper;
   } catch (const InvalidArgument& e) {
     throw UsageError(e.what());
   }
@@ -211,6 +227,7 @@ int run_correct(int argc, char** argv) {
   if (links < 1 || links > 100) throw UsageError("--links must be in [1, 100]");
   if (!with_map && opt.mode == correction::Mode::kInitBa)
     throw UsageError("--mode init+ba needs --map (bundle adjustment needs map points)");
+  opt.gate_anchors = args.flag("gate-anchors");
   opt.link_consecutive = true;
   opt.consecutive_links = static_cast<int>(links);
   const std::string first_window = args.get("first-window", "from-start");
@@ -373,8 +390,30 @@ int run_correct(int argc, char** argv) {
                 (corrector.init_message().empty() ? std::string("too few usable anchors")
                                                   : corrector.init_message()));
 
+  // ---- what became of each anchor ----------------------------------------------------------
+  const auto& decisions = corrector.anchor_decisions();
+  std::vector<char> used(anchors.size(), 0);
+  int after_init = 0, after_init_used = 0;
+  for (const auto& d : decisions) {
+    used[d.id] = d.used;
+    if (!std::isnan(d.innovation_m)) {
+      ++after_init;
+      after_init_used += d.used;
+    }
+    if (!d.used)
+      std::fprintf(stderr, "geodrift correct: %s line %d not used: %s\n", anchors_path.c_str(),
+                   anchors[d.id].line, d.why.c_str());
+  }
+  if (after_init >= 2 && after_init_used == 0)
+    throw Error("all " + std::to_string(after_init) + " anchors of " + anchors_path +
+                " after INIT were rejected as inconsistent with the path INIT's anchors give "
+                "(wrong INIT anchors, a broken trajectory, or anchors of another place): no "
+                "trustworthy result, nothing written");
+  std::size_t last_anchor_index = 0;
+  for (std::size_t j = 0; j < anchors.size(); ++j)
+    if (used[j]) last_anchor_index = std::max(last_anchor_index, locs[j].index);
+
   // ---- every pose in W -----------------------------------------------------------------------
-  const std::size_t last_anchor_index = locs.back().index;
   std::vector<io::TrajectoryCsvRow> rows(np);
   io::Trajectory out_traj;
   out_traj.has_timestamps = traj.has_timestamps;
@@ -415,8 +454,12 @@ int run_correct(int argc, char** argv) {
     io::SvgSeries path{"corrected path", "#1f77b4", 1.5, {}, false};
     for (const auto& c : track) path.points.push_back(c.head<2>());
     std::vector<io::SvgMarker> markers;
-    for (const auto& a : anchors)
-      markers.push_back({"anchor line " + std::to_string(a.line), a.y_w.head<2>(), "#d62728"});
+    for (std::size_t j = 0; j < anchors.size(); ++j)
+      markers.push_back(
+          used[j] ? io::SvgMarker{"anchor line " + std::to_string(anchors[j].line),
+                                  anchors[j].y_w.head<2>(), "#d62728"}
+                  : io::SvgMarker{"REJECTED anchor line " + std::to_string(anchors[j].line),
+                                  anchors[j].y_w.head<2>(), "#7f7f7f"});
     io::write_svg_topview(out.path("topview.svg"), {path}, markers,
                           "geodrift correct: corrected path (top view)", note);
   }
@@ -465,6 +508,7 @@ int run_correct(int argc, char** argv) {
     }
     std::ostringstream j;
     const auto& ir = corrector.init_result();
+    const bool paper_w = opt.edge_weights == correction::CorrectorOptions::EdgeWeights::kPaper;
     j << "{\n  \"geodrift_version\": " << io::detail::json_string(kVersion)
       << ",\n  \"command_line\": " << io::detail::json_string(command_line(argc, argv))
       << ",\n  \"frame\": " << io::detail::json_string(note)
@@ -478,8 +522,17 @@ int run_correct(int argc, char** argv) {
       << ", \"trajectory_only\": " << (with_map ? "false" : "true")
       << ", \"keyframe_step\": " << (with_map ? 0 : step) << ", \"consecutive_links\": " << links
       << ", \"window_correspondences\": " << opt.window_correspondences
-      << ", \"lambda1\": " << json_num(opt.lambda1) << ", \"lambda2\": " << json_num(opt.lambda2)
-      << ", \"lambda3\": " << json_num(opt.lambda3)
+      << ", \"edge_weights\": " << (paper_w ? "\"paper\"" : "\"drift\"")
+      << (paper_w
+              ? ", \"lambda1\": " + json_num(opt.lambda1) + ", \"lambda2\": " +
+                    json_num(opt.lambda2) + ", \"lambda3\": " + json_num(opt.lambda3)
+              : ", \"drift_model\": {\"scale_walk_per_sqrt_m\": " +
+                    json_num(opt.drift.scale_walk_per_sqrt_m) + ", \"rotation_walk_per_sqrt_m\": " +
+                    json_num(opt.drift.rotation_walk_per_sqrt_m) +
+                    ", \"turn_rotation_fraction\": " + json_num(opt.drift.turn_rotation_fraction) +
+                    ", \"turn_scale_per_rad\": " + json_num(opt.drift.turn_scale_per_rad) +
+                    ", \"direction_sd_rad\": " + json_num(opt.drift.direction_sd_rad) +
+                    ", \"min_distance_m\": " + json_num(opt.drift.min_distance_m) + "}")
       << ", \"min_shared_points\": " << opt.min_shared_points
       << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px)
       << ", \"first_window\": " << io::detail::json_string(first_window)
@@ -495,6 +548,23 @@ int run_correct(int argc, char** argv) {
       << ", \"rms_m\": " << json_num(ir.rms_m) << ", \"inliers\": " << ir.inliers.size()
       << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
       << ",\n  \"anchor_residuals_m\": " << residuals
+      << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor()) << ",\n  \"anchors\": [";
+    for (std::size_t d = 0; d < decisions.size(); ++d) {
+      const auto& x = decisions[d];
+      const io::Anchor& a = anchors[x.id];
+      const Eigen::Vector3d r = corrector.received_view_center_w(static_cast<int>(d)) - a.y_w;
+      j << (d ? "," : "") << "\n    {\"line\": " << a.line
+        << ", \"frame\": " << traj.poses[locs[x.id].index].frame
+        << ", \"used\": " << (x.used ? "true" : "false")
+        << ", \"why_not\": " << io::detail::json_string(x.why)
+        << ", \"readmitted\": " << (x.readmitted ? "true" : "false")
+        << ", \"sigma_m\": " << json_num(a.sigma_m)
+        << ", \"innovation_m\": " << json_num(x.innovation_m)
+        << ", \"gate_m\": " << json_num(x.gate_m)
+        << ", \"residual_2d_m\": " << json_num(r.head<2>().norm())
+        << ", \"residual_3d_m\": " << json_num(r.norm()) << "}";
+    }
+    j << "\n  ]"
       << ",\n  \"last_anchor_frame\": " << traj.poses[last_anchor_index].frame
       << ",\n  \"steps\": [";
     const auto& reps = corrector.reports();

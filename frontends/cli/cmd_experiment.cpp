@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -34,7 +35,8 @@ constexpr const char* kHelp =
     "usage: geodrift experiment [options]\n"
     "\n"
     "Regenerates the paper's KITTI table (Iwami et al., Table 2) on the monocular-drift\n"
-    "simulator: rows INIT, INIT+BA, INIT+PGO, Ours (INIT+PGO+BA), full batch, and the global\n"
+    "simulator: rows INIT, INIT+BA, INIT+PGO, Ours (INIT+PGO+BA), full batch, piecewise\n"
+    "similarity 2D/3D (the naive baseline), and the global\n"
     "Sim3 alignment of the uncorrected path; columns geo-tag intervals; cells mean +- sd of the\n"
     "mean 2D error [m] over seeds. Writes RESULTS.md, scale_<seq>.svg (interval 300 or the\n"
     "nearest given) and topview_<seq>.svg into --out.\n"
@@ -45,6 +47,16 @@ constexpr const char* kHelp =
     "  --seeds LIST       simulator seeds (default 1,2,3,4,5)\n"
     "  --data-dir DIR     folder with poses/, times/ and calib files (default data/kitti)\n"
     "  --threads N        seeds run in parallel (1 or 2, default 2)\n"
+    "  --trajectory-only  correct the keyframe path alone, without the map (as `geodrift\n"
+    "                     correct` without --map; INIT+BA has no map to adjust and is left out)\n"
+    "  --wrong-anchors F,MIN,MAX\n"
+    "                     shift a fraction F (0..1) of the anchors after INIT by MIN..MAX metres\n"
+    "                     in a random horizontal direction (seeded per run), as wrong geo-tags;\n"
+    "                     each cell then also gives its ratio to the same run with clean anchors\n"
+    "  --gate-anchors     test anchors against the path before using them\n"
+    "                     (CorrectorOptions::gate_anchors; off by default)\n"
+    "  --weights W        PGO edge weights: drift (default; the VO drift model, independent of\n"
+    "                     the map's unit) | paper (lambda1 = lambda2 = 1e5, lambda3 = 1)\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
 
 struct Method {
@@ -55,8 +67,10 @@ const Method kMethods[] = {{"INIT", correction::Mode::kInitOnly},
                            {"INIT+BA", correction::Mode::kInitBa},
                            {"INIT+PGO", correction::Mode::kInitPgo},
                            {"Ours (INIT+PGO+BA)", correction::Mode::kOurs},
-                           {"Full batch", correction::Mode::kFullBatch}};
-constexpr int kNumMethods = 5;
+                           {"Full batch", correction::Mode::kFullBatch},
+                           {"Piecewise similarity 2D", correction::Mode::kPiecewise2D},
+                           {"Piecewise similarity 3D", correction::Mode::kPiecewise3D}};
+constexpr int kNumMethods = 7;
 
 /// The paper's Table 2, for the rows it reports (intervals 100..500).
 std::vector<double> paper_row(const std::string& seq, const std::string& method) {
@@ -72,8 +86,41 @@ std::vector<double> paper_row(const std::string& seq, const std::string& method)
 
 struct Cell {
   std::vector<double> values;  // one per seed
-  double seconds = 0;          // correction time summed over seeds
+  std::vector<double> clean;   // with --wrong-anchors: the same run with clean anchors
+  int rejected_wrong = 0, wrong = 0, rejected_right = 0, right = 0;  // anchors after INIT
+  double seconds = 0;  // correction time summed over seeds
 };
+
+/// How the experiment's runs are set up (the command's options).
+struct Setup {
+  bool paper = false;                                           // --weights paper
+  bool trajectory_only = false;                                 // --trajectory-only
+  bool gate = false;                                            // --gate-anchors
+  double wrong_fraction = 0, wrong_min_m = 0, wrong_max_m = 0;  // --wrong-anchors
+};
+
+/// Shifts a fraction of the correspondences after INIT's (the first four) horizontally by
+/// min..max metres in a random direction; `wrong[j]` marks them. Seeded by (seed, interval).
+std::vector<map::Correspondence> corrupt(std::vector<map::Correspondence> corr, const Setup& setup,
+                                         unsigned seed, int interval, std::vector<char>* wrong) {
+  wrong->assign(corr.size(), 0);
+  const int first = 4;
+  const int n = static_cast<int>(corr.size()) - first;
+  if (n <= 0 || setup.wrong_fraction <= 0) return corr;
+  std::mt19937 rng(seed * 7919u + static_cast<unsigned>(interval));
+  std::vector<int> idx(n);
+  for (int i = 0; i < n; ++i) idx[i] = first + i;
+  std::shuffle(idx.begin(), idx.end(), rng);
+  const int k = std::max(1, static_cast<int>(std::lround(setup.wrong_fraction * n)));
+  std::uniform_real_distribution<double> dist(setup.wrong_min_m, setup.wrong_max_m);
+  std::uniform_real_distribution<double> ang(0, 2 * M_PI);
+  for (int i = 0; i < k && i < n; ++i) {
+    const double d = dist(rng), a = ang(rng);
+    corr[idx[i]].y_w += Eigen::Vector3d(d * std::cos(a), d * std::sin(a), 0);
+    (*wrong)[idx[i]] = 1;
+  }
+  return corr;
+}
 
 struct SeqResult {
   std::map<std::pair<int, int>, Cell> cells;  // (method, interval index)
@@ -113,13 +160,20 @@ std::vector<Eigen::Vector3d> centres(const correction::Corrector& c) {
 }
 
 void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
-              const std::vector<int>& intervals, int plot_interval, bool first_seed, SeqResult* res,
-              std::mutex* mu, int* done, int total) {
+              const Setup& setup, const std::vector<int>& intervals, int plot_interval,
+              bool first_seed, SeqResult* res, std::mutex* mu, int* done, int total) {
   const auto t0 = std::chrono::steady_clock::now();
   const sim::SimulatedSequence s = sim::simulate(seq, sim::SimOptions::kitti(name, seed));
   const double sim_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const sim::DriftStatistics drift = sim::drift_statistics(s);
-  std::map<std::pair<int, int>, std::pair<double, double>> local;  // (m, i) -> (err, secs)
+  std::map<std::pair<int, int>, Cell> local;  // (m, i) -> this seed's run
+  map::Map traj_only;
+  if (setup.trajectory_only) {
+    traj_only = s.map;
+    traj_only.points.clear();
+    traj_only.observations.clear();
+  }
+  const map::Map& input = setup.trajectory_only ? traj_only : s.map;
   std::vector<std::vector<Eigen::Vector3d>> plot(kNumMethods);
   std::vector<Eigen::Vector3d> anchors;
   int corr100 = 0;
@@ -127,20 +181,37 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
     std::vector<sim::GeoView> views;
     const auto corr = sim::kitti_correspondences(s, intervals[ii], &views);
     if (intervals[ii] == 100) corr100 = static_cast<int>(corr.size());
+    std::vector<char> wrong;
+    const auto bad = corrupt(corr, setup, seed, intervals[ii], &wrong);
     for (int m = 0; m < kNumMethods; ++m) {
+      if (setup.trajectory_only && kMethods[m].mode == correction::Mode::kInitBa) continue;
       correction::CorrectorOptions opt;
       opt.mode = kMethods[m].mode;
-      correction::Corrector c(opt);
-      correction::replay(s.map, corr, &c);
-      double secs = 0;
-      for (const auto& r : c.reports()) secs += r.seconds;
-      double err = NAN;
-      if (c.initialized()) {
-        const auto est = centres(c);
-        err = eval::horizontal_errors(est, s.gt_center_w).all.mean;
-        if (first_seed && intervals[ii] == plot_interval) plot[m] = est;
-      }
-      local[{m, static_cast<int>(ii)}] = {err, secs};
+      if (setup.paper) opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kPaper;
+      opt.gate_anchors = setup.gate;
+      Cell& cell = local[{m, static_cast<int>(ii)}];
+      auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run) {
+        correction::Corrector c(opt);
+        correction::replay(input, cs, &c);
+        double err = NAN;
+        if (c.initialized()) {
+          const auto est = centres(c);
+          err = eval::horizontal_errors(est, s.gt_center_w).all.mean;
+          if (main_run && first_seed && intervals[ii] == plot_interval) plot[m] = est;
+        }
+        if (main_run) {
+          for (const auto& r : c.reports()) cell.seconds += r.seconds;
+          const auto& dec = c.anchor_decisions();
+          for (const auto& d : dec) {
+            if (d.id < 4 || d.id >= static_cast<int>(wrong.size())) continue;
+            (wrong[d.id] ? cell.wrong : cell.right) += 1;
+            (wrong[d.id] ? cell.rejected_wrong : cell.rejected_right) += !d.used;
+          }
+        }
+        return err;
+      };
+      cell.values.push_back(run(setup.wrong_fraction > 0 ? bad : corr, true));
+      if (setup.wrong_fraction > 0) cell.clean.push_back(run(corr, false));
       if (first_seed && intervals[ii] == plot_interval && m == 0)
         for (const auto& cc : corr) anchors.push_back(cc.y_w);
     }
@@ -152,8 +223,14 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
   }
   std::lock_guard<std::mutex> lock(*mu);
   for (const auto& [k, v] : local) {
-    res->cells[k].values.push_back(v.first);
-    res->cells[k].seconds += v.second;
+    Cell& c = res->cells[k];
+    c.values.insert(c.values.end(), v.values.begin(), v.values.end());
+    c.clean.insert(c.clean.end(), v.clean.begin(), v.clean.end());
+    c.seconds += v.seconds;
+    c.wrong += v.wrong;
+    c.right += v.right;
+    c.rejected_wrong += v.rejected_wrong;
+    c.rejected_right += v.rejected_right;
   }
   res->global_sim3.push_back(drift.global.errors.all.mean);
   res->drift.push_back(drift);
@@ -178,8 +255,10 @@ std::vector<Eigen::Vector2d> xy(const std::vector<Eigen::Vector3d>& p) {
 }  // namespace
 
 int run_experiment(int argc, char** argv) {
-  const Args args(argc, argv, {"sequences", "intervals", "seeds", "data-dir", "threads", "out"},
-                  {"help", "force"});
+  const Args args(
+      argc, argv,
+      {"sequences", "intervals", "seeds", "data-dir", "threads", "weights", "wrong-anchors", "out"},
+      {"help", "force", "trajectory-only", "gate-anchors"});
   if (args.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -206,6 +285,25 @@ int run_experiment(int argc, char** argv) {
     throw UsageError("--sequences, --intervals and --seeds must not be empty");
   const int threads = static_cast<int>(args.get_int("threads", 2));
   if (threads < 1 || threads > 2) throw UsageError("--threads must be 1 or 2");
+  Setup setup;
+  try {
+    setup.paper = correction::paper_weights_from_string(args.get("weights", "drift"));
+  } catch (const InvalidArgument& e) {
+    throw UsageError(std::string("--weights: ") + e.what());
+  }
+  setup.trajectory_only = args.flag("trajectory-only");
+  setup.gate = args.flag("gate-anchors");
+  if (args.has("wrong-anchors")) {
+    const auto w = parse_number_list("wrong-anchors", args.get("wrong-anchors"));
+    if (w.size() != 3 || !(w[0] > 0 && w[0] <= 1) || !(w[1] >= 0 && w[2] >= w[1]))
+      throw UsageError(
+          "--wrong-anchors: expected F,MIN,MAX with 0 < F <= 1 and 0 <= MIN <= MAX "
+          "(metres), got '" +
+          args.get("wrong-anchors") + "'");
+    setup.wrong_fraction = w[0];
+    setup.wrong_min_m = w[1];
+    setup.wrong_max_m = w[2];
+  }
   const std::string data = args.get("data-dir", "data/kitti");
   StagedOutput out(args.required("out"), args.flag("force"));
 
@@ -226,7 +324,7 @@ int run_experiment(int argc, char** argv) {
     for (std::size_t k = 0; k < seeds.size(); k += threads) {
       std::vector<std::thread> pool;
       for (int t = 0; t < threads && k + t < seeds.size(); ++t)
-        pool.emplace_back(run_seed, std::cref(seq), std::cref(name), seeds[k + t],
+        pool.emplace_back(run_seed, std::cref(seq), std::cref(name), seeds[k + t], std::cref(setup),
                           std::cref(intervals), plot_interval, k + t == 0, &res, &mu, &done, total);
       for (auto& th : pool) th.join();
     }
@@ -251,6 +349,18 @@ int run_experiment(int argc, char** argv) {
         "200, then every N frames. Paper = Iwami et al., Table 2 and Sec. 4.3 (ORB-SLAM on the "
         "real sequences). Lat/lon outputs use the assumed KITTI origin "
         "(49.0110 N, 8.4170 E, 160 m).\n\n";
+  if (setup.trajectory_only)
+    md << "**Trajectory only**: the keyframe path without its map points, as `geodrift correct` "
+          "without --map (no covisibility: each keyframe is linked to its predecessor; no BA, "
+          "so Ours = INIT+PGO).\n\n";
+  if (setup.wrong_fraction > 0)
+    md << "**Wrong anchors**: " << 100 * setup.wrong_fraction
+       << " % of the anchors after INIT's four shifted by " << setup.wrong_min_m << "–"
+       << setup.wrong_max_m
+       << " m in a random horizontal direction (seeded per seed and interval); each cell "
+          "gives in brackets the ratio of its mean to the same runs with clean anchors.\n\n";
+  md << "PGO edge weights: " << (setup.paper ? "paper (λ1 = λ2 = 1e5, λ3 = 1)" : "drift model")
+     << " (docs/correction_model.md); anchor gate " << (setup.gate ? "on" : "off") << ".\n\n";
   for (const std::string& name : seqs) {
     const SeqResult& r = results.at(name);
     md << "## Sequence " << name << "\n\n| method |";
@@ -259,9 +369,18 @@ int run_experiment(int argc, char** argv) {
     for (std::size_t i = 0; i < intervals.size(); ++i) md << "---|";
     md << "---|\n";
     for (int m = 0; m < kNumMethods; ++m) {
+      if (!r.cells.count({m, 0})) continue;
       md << "| " << kMethods[m].name << " |";
-      for (std::size_t i = 0; i < intervals.size(); ++i)
-        md << " " << fmt_cell(r.cells.at({m, static_cast<int>(i)})) << " |";
+      for (std::size_t i = 0; i < intervals.size(); ++i) {
+        const Cell& c = r.cells.at({m, static_cast<int>(i)});
+        md << " " << fmt_cell(c);
+        if (!c.clean.empty()) {
+          char b[64];
+          std::snprintf(b, sizeof b, " (%.2f× clean)", mean(c.values) / mean(c.clean));
+          md << b;
+        }
+        md << " |";
+      }
       std::ostringstream p;
       for (double v : paper_row(name, kMethods[m].name)) p << v << " ";
       md << " " << (p.str().empty() ? "—" : p.str()) << "|\n";
@@ -271,8 +390,26 @@ int run_experiment(int argc, char** argv) {
     md << "| Global Sim3 of the uncorrected path |";
     for (std::size_t i = 0; i < intervals.size(); ++i) md << " " << g << " |";
     md << " " << sim::paper_global_sim3_error_m(name) << " |\n\n";
+    if (setup.wrong_fraction > 0) {
+      md << "Anchors after INIT rejected by each method (all seeds and intervals): ";
+      for (int m = 0; m < kNumMethods; ++m) {
+        if (!r.cells.count({m, 0})) continue;
+        int rw = 0, w = 0, rr = 0, rt = 0;
+        for (std::size_t i = 0; i < intervals.size(); ++i) {
+          const Cell& c = r.cells.at({m, static_cast<int>(i)});
+          rw += c.rejected_wrong;
+          w += c.wrong;
+          rr += c.rejected_right;
+          rt += c.right;
+        }
+        md << kMethods[m].name << ": " << rw << " of " << w << " wrong, " << rr << " of " << rt
+           << " correct; ";
+      }
+      md << "\n\n";
+    }
     md << "Correction time per seed (all correspondences of the whole sequence) [s]: ";
     for (int m = 0; m < kNumMethods; ++m) {
+      if (!r.cells.count({m, 0})) continue;
       md << kMethods[m].name << ":";
       for (std::size_t i = 0; i < intervals.size(); ++i) {
         char b[32];
@@ -309,7 +446,8 @@ int run_experiment(int argc, char** argv) {
     // Plots (first seed).
     const std::string note = "W = UTM 32N shifted to the KITTI frame-0 origin (assumed)";
     std::vector<io::SvgSeries> top;
-    const char* colors[] = {"#999999", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd"};
+    const char* colors[] = {"#999999", "#ff7f0e", "#2ca02c", "#d62728",
+                            "#9467bd", "#8c564b", "#e377c2"};
     top.push_back(io::SvgSeries{"ground truth", "#000000", 2.0, xy(r.plot_gt), false});
     std::vector<io::SvgSeries> scale;
     for (int m = 0; m < kNumMethods; ++m) {
