@@ -55,12 +55,14 @@ options
   --origin LAT,LON,H  origin of W (degrees, degrees, ellipsoidal metres); default: first anchor
   --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
                       always one); the others are carried along by their raw relative pose
-  --weights W         pose-graph edge weights: drift (default) | paper. drift: each edge
-                      carries the monocular VO's relative-pose uncertainty over its distance and
-                      turn (docs/correction_model.md), anchors their sigma_m: the result does
-                      not depend on the map's unit. paper: lambda1 = lambda2 = 1e5 on every
-                      Sim(3) component in map units, lambda3 = 1 (Iwami et al.): the result
-                      changes with the map's unit
+  --weights W         pose-graph edge weights: paper (default) | drift. paper:
+                      lambda1 = lambda2 = 1e5 on every Sim(3) component in map units,
+                      lambda3 = 1 (Iwami et al.): the result changes with the map's unit.
+                      drift: each edge carries the monocular VO's relative-pose uncertainty
+                      over its distance and turn, anchors their sigma_m
+                      (docs/correction_model.md): the result does not depend on the map's
+                      unit; experimental (better at anchors every 100-200 frames, worse at
+                      300-500, and not always convergent from INIT: docs/RESULTS.md)
   --gate-anchors      test each anchor after INIT against the path the previous ones give
                       and leave out those that do not fit (named on stderr and in report.json;
                       INIT's RANSAC outliers too); experimental, off by default: it catches
@@ -212,7 +214,7 @@ int run_correct(int argc, char** argv) {
   try {
     opt.mode = correction::mode_from_string(args.get("mode", "ours"));
     format = io::parse_trajectory_format(args.get("format", "auto"));
-    if (correction::paper_weights_from_string(args.get("weights", "drift")))
+    if (correction::paper_weights_from_string(args.get("weights", "paper")))
       opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kPaper;
   } catch (const InvalidArgument& e) {
     throw UsageError(e.what());

@@ -55,8 +55,8 @@ constexpr const char* kHelp =
     "                     each cell then also gives its ratio to the same run with clean anchors\n"
     "  --gate-anchors     test anchors against the path before using them\n"
     "                     (CorrectorOptions::gate_anchors; off by default)\n"
-    "  --weights W        PGO edge weights: drift (default; the VO drift model, independent of\n"
-    "                     the map's unit) | paper (lambda1 = lambda2 = 1e5, lambda3 = 1)\n"
+    "  --weights W        PGO edge weights: paper (default; lambda1 = lambda2 = 1e5, lambda3 = 1)\n"
+    "                     | drift (the VO drift model, independent of the map's unit)\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
 
 struct Method {
@@ -287,7 +287,7 @@ int run_experiment(int argc, char** argv) {
   if (threads < 1 || threads > 2) throw UsageError("--threads must be 1 or 2");
   Setup setup;
   try {
-    setup.paper = correction::paper_weights_from_string(args.get("weights", "drift"));
+    setup.paper = correction::paper_weights_from_string(args.get("weights", "paper"));
   } catch (const InvalidArgument& e) {
     throw UsageError(std::string("--weights: ") + e.what());
   }

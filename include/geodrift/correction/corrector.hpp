@@ -114,18 +114,23 @@ struct CorrectorOptions {
   /// final mean 2D error of Ours drops from 7.2 to 4.7 m (INIT+PGO: 4.9 to 4.3 m).
   bool first_window_from_start = true;
   /// How the PGO edges are weighted.
-  ///  - kDriftModel (default): every edge carries the uncertainty of what it measures, in
+  ///  - kDriftModel: every edge carries the uncertainty of what it measures, in
   ///    physical units (correction/drift_model.hpp, docs/correction_model.md): e1 the VO's
   ///    relative-pose error over the pair's distance and turn (`drift`); e2 the same over the
   ///    keyframe→view offset, plus the view's PnP covariance when it has one; e3 the geo-tag's
   ///    σ (Correspondence::sigma_m, ba_geo_sigma_m when unset). The corrected path does not
-  ///    depend on the map's unit or frame. lambda1..3 are not used.
-  ///  - kPaper: the paper's λ1 = λ2 = 1e5 on all seven components of e1/e2 in MAP units and
+  ///    depend on the map's unit or frame. lambda1..3 are not used. Not the default yet:
+  ///    measured on the simulator (docs/RESULTS.md, "Drift-model weights") it is better at
+  ///    anchor intervals of 100-200 frames and worse at 300-500 on 08, and LM from INIT's
+  ///    state does not always converge with it (full batch on 02 seed 2: 50 iterations at cost
+  ///    8.9e5, 61 m; sliding windows on 08 at 400, one seed of five diverges).
+  ///  - kPaper (default): the paper's λ1 = λ2 = 1e5 on all seven components of e1/e2 in MAP units
+  ///  and
   ///    λ3 = 1 on e3 in metres. A map unit of translation then weighs as much as a radian and a
   ///    unit of log-scale, so the result changes with the map's unit (a monocular map's unit
   ///    is arbitrary: ORB-SLAM sets it from the first median depth).
   enum class EdgeWeights { kDriftModel, kPaper };
-  EdgeWeights edge_weights = EdgeWeights::kDriftModel;
+  EdgeWeights edge_weights = EdgeWeights::kPaper;
   DriftModel drift;      ///< the VO's error model (kDriftModel)
   double lambda1 = 1e5;  ///< kPaper: weight of e1 (keyframe–keyframe Sim3 edges)
   double lambda2 = 1e5;  ///< kPaper: weight of e2 (keyframe–geo-view Sim3 edges)
