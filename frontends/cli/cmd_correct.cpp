@@ -116,30 +116,6 @@ lie::SE3d interpolate(const lie::SE3d& a_cw, const lie::SE3d& b_cw, double fract
   return lie::SE3d(R, c).inverse();
 }
 
-/// Reads a times file (one number per non-comment line) for `n` poses.
-std::vector<double> read_times(const std::string& path, std::size_t n) {
-  io::detail::LineReader reader(path);
-  std::vector<double> t;
-  std::string raw;
-  while (reader.next(&raw)) {
-    const std::string s = io::detail::trim(raw);
-    if (s.empty() || s[0] == '#') continue;
-    const auto f = io::detail::split_ws(s);
-    if (f.size() != 1)
-      io::detail::parse_error(
-          path, reader.line(),
-          "expected one timestamp, found " + std::to_string(f.size()) + " fields");
-    const double v = io::detail::parse_double(f[0], path, reader.line(), "timestamp");
-    if (!t.empty() && !(v > t.back()))
-      io::detail::parse_error(path, reader.line(), "timestamps must strictly increase");
-    t.push_back(v);
-  }
-  if (t.size() != n)
-    throw InvalidArgument(path + ": " + std::to_string(t.size()) + " timestamps for " +
-                          std::to_string(n) + " trajectory poses");
-  return t;
-}
-
 std::string json_num(double v) {
   return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
 }
@@ -263,7 +239,7 @@ int run_correct(int argc, char** argv) {
   // ---- inputs -------------------------------------------------------------------------------
   io::Trajectory traj = io::read_trajectory(traj_path, format);
   if (args.has("times")) {
-    const std::vector<double> t = read_times(args.get("times"), traj.poses.size());
+    const std::vector<double> t = read_times_file(args.get("times"), traj.poses.size(), traj_path);
     for (std::size_t i = 0; i < t.size(); ++i) traj.poses[i].timestamp = t[i];
     traj.has_timestamps = true;
   }

@@ -93,36 +93,6 @@ struct Result {
   int untimed_line = 0;    // trajectory.csv: first row without a timestamp (0: none)
 };
 
-/// Reads a times file (one timestamp per non-comment line, strictly increasing) for `n` poses
-/// of `for_path`.
-std::vector<double> read_times_file(const std::string& path, std::size_t n,
-                                    const std::string& for_path) {
-  io::detail::LineReader reader(path);
-  std::vector<double> t;
-  std::string raw;
-  while (reader.next(&raw)) {
-    const std::string s = io::detail::trim(raw);
-    if (s.empty() || s[0] == '#') continue;
-    const auto f = io::detail::split_ws(s);
-    if (f.size() != 1)
-      io::detail::parse_error(
-          path, reader.line(),
-          "expected one timestamp, found " + std::to_string(f.size()) + " fields");
-    const double v = io::detail::parse_double(f[0], path, reader.line(), "timestamp");
-    if (!t.empty() && !(v > t.back())) {
-      std::ostringstream os;
-      os << std::setprecision(17) << "timestamp " << v << " does not increase (previous "
-         << t.back() << ")";
-      io::detail::parse_error(path, reader.line(), os.str());
-    }
-    t.push_back(v);
-  }
-  if (t.size() != n)
-    throw InvalidArgument(path + ": " + std::to_string(t.size()) + " timestamps for the " +
-                          std::to_string(n) + " poses of " + for_path);
-  return t;
-}
-
 Eigen::Isometry3d iso(const lie::SE3d& T) {
   Eigen::Isometry3d I = Eigen::Isometry3d::Identity();
   I.matrix() = T.matrix();
