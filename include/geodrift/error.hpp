@@ -1,5 +1,13 @@
 #pragma once
 
+/// @file
+/// geodrift's exceptions and checks (STYLE.md §8): Error (I/O and other failures, naming the
+/// path), InvalidArgument (a value outside its documented domain; the message names the value
+/// and the limit), GEODRIFT_CHECK (input validation at API boundaries, always on) and
+/// GEODRIFT_ASSERT (internal invariants, off under NDEBUG unless GEODRIFT_ENABLE_ASSERTS; throws
+/// Error, never aborts). Numerical outcomes (no convergence, a failed factorisation) are not
+/// exceptions: they are reported in solver::Summary.
+
 #include <sstream>
 #include <stdexcept>
 #include <string>

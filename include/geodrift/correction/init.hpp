@@ -1,5 +1,13 @@
 #pragma once
 
+/// @file
+/// INIT (paper Sec. 3.4; DESIGN.md "Correction" step 1): the first map -> world similarity,
+/// S_wm with p_W = S_wm·p_M. It levels the map (the PCA plane of the camera centres gets W's
+/// up, +z), then fits a horizontal similarity (a, b, s = exp(σ), θ) plus a height offset c to
+/// the correspondences, by RANSAC and LM. Inputs: centres and anchors in M (any unit), geo-tags
+/// in W (metres). Degenerate input (coincident anchors, too few inliers) gives ok = false and a
+/// reason, never an arbitrary transform.
+
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
 #include <algorithm>

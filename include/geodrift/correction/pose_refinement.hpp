@@ -4,6 +4,10 @@
 /// Levenberg–Marquardt refinement of a camera pose from 3D–2D pairs on the core solver: the
 /// "PnP + LM" step that localizes a geo view in the map (paper Sec. 3.2), shared by the
 /// simulator (sim::simulate) and the geo-tag frontend (geotag::localize_view).
+///
+/// Conventions: the pose is T_cw (world or map frame -> camera, OpenCV camera x right, y down,
+/// z forward), in the unit of the given points; residuals in pixels; the pose update and its
+/// covariance use the LEFT perturbation T ← exp(δ)·T, tangent (ω, ν).
 
 #include <Eigen/Core>
 #include <cmath>

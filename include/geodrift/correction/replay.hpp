@@ -1,5 +1,11 @@
 #pragma once
 
+/// @file
+/// replay(): feeds a complete map::Map and its correspondences to a Corrector in the order a
+/// SLAM system would have produced them (keyframes in time order, points after their reference
+/// keyframe, correspondences after their keyframe), so `geodrift correct`, the experiment and
+/// the tests all see the same stream as `geodrift run`. Everything stays in M as given.
+
 #include <algorithm>
 #include <functional>
 #include <vector>

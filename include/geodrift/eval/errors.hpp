@@ -1,5 +1,12 @@
 #pragma once
 
+/// @file
+/// The paper's evaluation metrics (DESIGN.md "Evaluation"): the 2D error (horizontal distance
+/// in W, metres) of corrected keyframe centres against ground truth, with mean / SD / max, also
+/// after the last anchor alone; the global Sim(3) error (Umeyama alignment of the uncorrected
+/// path, in M, to ground truth in W); ATE and RPE. Missing ground truth is marked by NaN
+/// entries, which are skipped.
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <algorithm>

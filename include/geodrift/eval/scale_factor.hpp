@@ -1,5 +1,11 @@
 #pragma once
 
+/// @file
+/// Scale factor along the path (DESIGN.md "Evaluation", the paper's Fig. 7): estimated over
+/// true chord distance across a sliding window of keyframes (1 = locally correct scale; the
+/// estimate must be in metres, in W), and the windowed scale statistics used to calibrate the
+/// drift simulator.
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>

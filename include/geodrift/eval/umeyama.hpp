@@ -1,5 +1,12 @@
 #pragma once
 
+/// @file
+/// Umeyama (1991) least-squares alignment of two point sets: a similarity dst ≈ s·R·src + t
+/// (Sim(3)) or a rigid one (s = 1). Source points in their own frame (e.g. the map M), target
+/// points in the target frame (e.g. W, metres). Degenerate inputs (fewer than 3 pairs,
+/// coincident or collinear points) are reported in Alignment::status, never turned into an
+/// arbitrary rotation.
+
 #include <Eigen/Core>
 #include <Eigen/SVD>
 #include <cmath>

@@ -1,5 +1,11 @@
 #pragma once
 
+/// @file
+/// map::Camera: the pinhole intrinsics (fx, fy, cx, cy in pixels, image size) shared by the
+/// core and the frontends. Images are undistorted by the front end, so there are no distortion
+/// terms. Camera frame x right, y down, z forward (OpenCV, DESIGN.md); pixel centres at integer
+/// coordinates.
+
 #include <Eigen/Core>
 #include <cmath>
 

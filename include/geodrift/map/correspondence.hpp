@@ -1,5 +1,12 @@
 #pragma once
 
+/// @file
+/// map::Correspondence: the paper's C_map-world, one geo view (or GNSS fix) localized in the
+/// map. It holds the fixed keyframe -> view pose T_vk (SE(3), M units), the geo-tag position
+/// y_w in W (metres), its standard deviation sigma_m (metres) and, when PnP produced one, the
+/// view pose covariance (tangent (ω, ν), LEFT perturbation, rad² and M units²). This is what
+/// the Corrector consumes.
+
 #include <Eigen/Core>
 
 #include "geodrift/lie/se3.hpp"

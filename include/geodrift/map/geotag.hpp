@@ -1,5 +1,10 @@
 #pragma once
 
+/// @file
+/// map::GeoTag: where a geo-tagged image was taken. Latitude and longitude in WGS84 degrees,
+/// ellipsoidal height in metres, heading in RADIANS clockwise from true north (NaN when
+/// unknown; files carry it in degrees as `heading_deg`). geo::LocalFrame maps it into W.
+
 #include <limits>
 
 namespace geodrift::map {

@@ -1,5 +1,10 @@
 #pragma once
 
+/// @file
+/// map::Keyframe: one keyframe of the reconstruction, with its pose T_cw (map frame M -> camera,
+/// SE(3), in M's arbitrary unit; ORB-SLAM's convention, DESIGN.md), its video frame index and
+/// timestamp (seconds). The camera centre is T_cw⁻¹·0, in M.
+
 #include "geodrift/lie/se3.hpp"
 
 namespace geodrift::map {

@@ -1,5 +1,11 @@
 #pragma once
 
+/// @file
+/// map::Map: a whole reconstruction in its own frame M (arbitrary scale and orientation):
+/// cameras, keyframes (T_cw, M -> camera), points (in M) and observations (pixels). Also
+/// covisibility() (keyframe pairs that share points). This is the interchange type between a
+/// front end, io/ (COLMAP text model) and the Corrector, which copies it and never rewrites it.
+
 #include <algorithm>
 #include <map>
 #include <unordered_map>

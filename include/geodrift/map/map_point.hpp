@@ -1,5 +1,10 @@
 #pragma once
 
+/// @file
+/// map::MapPoint (a triangulated point in the map frame M, M's unit, with its reference
+/// keyframe) and map::Observation (a point seen in a keyframe, pixels of its undistorted
+/// image). A point moves with its reference keyframe's correction (DESIGN.md).
+
 #include <Eigen/Core>
 
 namespace geodrift::map {

@@ -1,5 +1,10 @@
 #pragma once
 
+/// @file
+/// GeoViewCentreResidual: the BA geo term (paper eq. (9)), r = c_view − y_w in metres (W), the
+/// geo view's camera centre tied to its keyframe's metric pose T_kw (world -> camera, SE(3)).
+/// Jacobian w.r.t. the LEFT perturbation T ← exp(δ)·T, tangent (ω, ν).
+
 #include <Eigen/Core>
 
 #include "geodrift/lie/se3.hpp"

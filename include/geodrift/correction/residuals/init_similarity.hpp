@@ -1,5 +1,11 @@
 #pragma once
 
+/// @file
+/// InitSimilarityResidual: INIT's residual r = A(p') − y (metres, W) for a levelled map point p'
+/// and its geo-tag y, with A the 4-parameter horizontal similarity plus a height offset,
+/// parameters (a, b, σ, θ, c) in metres / log-scale / radians / metres (a Euclidean block:
+/// the update is x ← x + δ).
+
 #include <Eigen/Core>
 #include <cmath>
 
