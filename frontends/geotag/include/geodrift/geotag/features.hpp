@@ -4,6 +4,8 @@
 /// Local features of the geotag pipeline: ORB (matching, the paper's Sec. 3.3 "Keypoint
 /// Matching") and SIFT (retrieval), and the putative ORB matcher (Lowe ratio test + mutual
 /// nearest-neighbour check, Hamming distance).
+/// Keypoints are OpenCV's (cv::KeyPoint: pixels of the full-resolution image, x right, y down,
+/// angle in degrees); OpenCV types stay inside the frontend.
 
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>

@@ -3,6 +3,8 @@
 /// ORB features spread over the image: OpenCV's ORB pyramid detector, then a grid selection
 /// (strongest responses per cell first, as ORB-SLAM's distribution step intends), so texture-
 /// rich corners do not take the whole budget.
+/// Keypoints are OpenCV's (cv::KeyPoint: level-0 pixels of the undistorted image, x right,
+/// y down; octave = pyramid level); descriptors are 256-bit ORB rows (CV_8U, 32 columns).
 
 #include <cstdint>
 #include <opencv2/core.hpp>

@@ -2,6 +2,8 @@
 /// @file
 /// VO input: calibration files and frame sources (an image folder sorted by name, KITTI layout
 /// included, or a video through cv::VideoCapture). Images only: the VO never reads depth or poses.
+/// Intrinsics in pixels, OpenCV distortion order (k1, k2, p1, p2[, k3]); frames are undistorted
+/// here (Undistorter) so that everything downstream sees a plain pinhole map::Camera.
 
 #include <memory>
 #include <opencv2/core.hpp>

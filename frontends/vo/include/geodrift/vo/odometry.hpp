@@ -26,6 +26,11 @@
 /// The batch carries the raw keyframe (T_cw in M), the map points first seen final with it, its
 /// observations, and the KeyframeView the geo-tag pipeline needs. The full current map is
 /// available any time through map().
+///
+/// Conventions: the map frame M is the first keyframe's camera frame, its unit set by the
+/// initial map's median depth = 1 (as ORB-SLAM); poses are T_cw (M -> camera, OpenCV camera
+/// x right, y down, z forward); pixels are those of the undistorted frames; the core's LEFT
+/// perturbation in every pose refinement and BA.
 
 #include <functional>
 #include <memory>

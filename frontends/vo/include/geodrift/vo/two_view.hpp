@@ -7,6 +7,10 @@
 /// triangulated with cheirality, reprojection and parallax checks. The result fails with a reason
 /// (too few matches, pure rotation / too little parallax, ambiguous homography solution).
 /// The accepted solution is refined by a two-view bundle adjustment through the core solver.
+///
+/// Conventions: pixels of the undistorted images, OpenCV camera (x right, y down, z forward);
+/// the result is T_21 (camera 1 -> camera 2) with a unit baseline |t| = 1, which fixes the
+/// map's arbitrary scale, and points in camera 1's frame.
 
 #include <Eigen/Core>
 #include <string>
