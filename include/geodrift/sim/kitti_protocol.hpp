@@ -5,6 +5,10 @@
 /// calibration of a KITTI odometry sequence, the anchor (geo-tagged image) schedule and the
 /// paper's reference numbers. The simulator (drift_simulator.hpp) turns a KittiSequence into
 /// what a monocular SLAM would output.
+///
+/// Conventions: KITTI poses are kept as read, T_K_c (cam0 -> KITTI world = cam0 of frame 0,
+/// OpenCV camera axes, metres); geo/kitti.hpp maps them into W (E = x, N = z, U = −y). Times in
+/// seconds; anchors are given by frame index.
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>

@@ -1,7 +1,10 @@
 #pragma once
 
 /// @file
-/// Pinhole reprojection residual for bundle adjustment.
+/// Pinhole reprojection residual for bundle adjustment: r = π(T_cw·X_w) − uv in pixels (of the
+/// undistorted image), T_cw world -> camera (SE3, OpenCV camera x right, y down, z forward),
+/// X_w in the world or map frame, in the unit of the poses. Jacobians w.r.t. the LEFT
+/// perturbation T ← exp(δ)·T, tangent (ω, ν), and X ← X + δ.
 
 #include <Eigen/Core>
 
