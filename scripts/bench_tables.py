@@ -55,7 +55,7 @@ def load(path):
     return data["context"], rows
 
 
-def run_line(ctx, path):
+def run_line(ctx, path, seed=False):
     load_avg = ctx.get("load_avg") or []
     parts = [ctx.get("date", "?")]
     if "commit" in ctx:
@@ -65,7 +65,7 @@ def run_line(ctx, path):
         parts.append("load average at start " + " / ".join(f"{x:.2f}" for x in load_avg))
     if "load" in ctx:
         parts.append(f"load during the run {ctx['load']}")
-    if "drift_seed" in ctx:
+    if seed and "drift_seed" in ctx:
         parts.append(f"drift seed {ctx['drift_seed']}")
     if "note" in ctx:
         parts.append(ctx["note"])
@@ -120,7 +120,7 @@ def t_sim3_paired(results):
                 f"{ms(c(b, 'reach_cpu_ms_median'))} ({c(b, 'reach_iterations_median'):.0f})",
                 ratios, f"**{med:.1f}×**", f"{c(b, 'ratio_min'):.1f}×",
                 f"{med / 20:.2f}" + ("" if ok else " (a round did not converge/reach)")]))
-        notes.append(run_line(ctx, path))
+        notes.append(run_line(ctx, path, seed=True))
     rows.sort(key=lambda r: r[:3])
     out += table(["seed", "keyframes", "memory", "Ceres to convergence [ms CPU, median]",
                   "ours to Ceres' cost [ms CPU, median] (iterations)", "per-round ratios",
@@ -148,7 +148,7 @@ def t_sim3_cholmod(results):
     rows.sort(key=lambda r: (r[0] != "OursCholmod", r[1]))  # plain LM first
     return table(["row", "keyframes", "LM iterations", "CPU per step [ms]",
                   "one bare CHOLMOD factorisation [ms CPU]", "step / factorisation", "target"],
-                 [r[2] for r in rows]) + ["", run_line(ctx, path)]
+                 [r[2] for r in rows]) + ["", run_line(ctx, path, seed=True)]
 
 
 def t_ba(results):
@@ -212,13 +212,17 @@ def t_correction(results):
     if not os.path.exists(path):
         return None
     ctx, bench = load(path)
-    order = [("0/0", "init+pgo"), ("1/0", "ours (defaults: two-pass BA)"),
-             ("1/2", "peer: ours, one-pass BA (round-3 defaults)"),
-             ("1/1", "peer: ours, round-1 options"), ("2/0", "full batch")]
-    ours = bench.get("BM_Correct_Kitti02_Interval100/1/0")
+    # Rows by their label (correction::to_string(mode) + the peer's suffix), not by the enum's
+    # numeric arguments.
+    order = [("init+pgo", "init+pgo"), ("ours", "ours (defaults: two-pass BA)"),
+             ("ours (one-pass BA)", "peer: ours, one-pass BA (round-3 defaults)"),
+             ("ours (before)", "peer: ours, round-1 options"), ("batch", "full batch")]
+    by_label = {c(b, "label"): b for n, b in bench.items()
+                if n.startswith("BM_Correct_Kitti02_Interval100/")}
+    ours = by_label.get("ours")
     rows = []
-    for args, label in order:
-        b = bench.get(f"BM_Correct_Kitti02_Interval100/{args}")
+    for key, label in order:
+        b = by_label.get(key)
         if not b:
             continue
         rel = c(b, "cpu_time") / c(ours, "cpu_time") if ours else None
@@ -272,8 +276,6 @@ def t_kvld(results):
     orb = bench.get("BM_Orb_DetectCompute")
     rows = []
     for name, b in bench.items():
-        if b.get("run_type") == "aggregate" or name in bench and name.endswith("_median"):
-            pass
         m = re.match(r"BM_Kvld_Filter/(\d+)", name)
         if m:
             label = f"K-VLD, {int(m.group(1)):,} putative matches"
@@ -282,7 +284,7 @@ def t_kvld(results):
         elif name == "BM_Kvld_ImageScale":
             label, extra = "peer: ImageScale of one 1241×376 image", f"{c(b, 'levels'):.0f} levels"
         elif name == "BM_Orb_DetectCompute":
-            label, extra = "peer: ORB detect + compute, one frame", f"{c(b, 'keypoints'):.0f} keypoints"
+            label, extra = "peer: ORB detect + compute, one frame", f"{c(b, 'keypoints'):,.0f} keypoints"
         else:
             continue
         rows.append((name, [label, ms(c(b, "real_time")), f"**{ms(c(b, 'cpu_time'))}**",
