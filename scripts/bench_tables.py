@@ -45,7 +45,7 @@ def load(path):
     rows = {}
     for b in data["benchmarks"]:
         name = b.get("run_name", b["name"])
-        name = re.sub(r"/iterations:\d+|/manual_time|/real_time", "", name)
+        name = re.sub(r"/iterations:\d+|/repeats:\d+|/manual_time|/real_time", "", name)
         if b.get("run_type") == "aggregate":
             if b.get("aggregate_name") != "median":
                 continue
@@ -58,8 +58,7 @@ def load(path):
 def run_line(ctx, path, seed=False):
     load_avg = ctx.get("load_avg") or []
     parts = [ctx.get("date", "?")]
-    if "commit" in ctx:
-        parts.append(f"commit {ctx['commit']}")
+    parts.append(f"commit {ctx['commit']}" if "commit" in ctx else "commit not recorded")
     parts.append(f"{ctx.get('num_cpus', '?')} CPUs at {ctx.get('mhz_per_cpu', '?')} MHz")
     if load_avg:
         parts.append("load average at start " + " / ".join(f"{x:.2f}" for x in load_avg))
@@ -120,12 +119,12 @@ def t_sim3_paired(results):
                 f"{ms(c(b, 'reach_cpu_ms_median'))} ({c(b, 'reach_iterations_median'):.0f})",
                 ratios, f"**{med:.1f}×**", f"{c(b, 'ratio_min'):.1f}×",
                 f"{med / 20:.2f}" + ("" if ok else " (a round did not converge/reach)")]))
-        notes.append(run_line(ctx, path, seed=True))
-    rows.sort(key=lambda r: r[:3])
+        notes += ["", run_line(ctx, path, seed=True)]
+    rows.sort(key=lambda r: (r[0] != 7, r[:3]))  # seed 7 (the benchmark's default) first
     out += table(["seed", "keyframes", "memory", "Ceres to convergence [ms CPU, median]",
                   "ours to Ceres' cost [ms CPU, median] (iterations)", "per-round ratios",
                   "median", "lowest", "median / 20× target"], [r[3] for r in rows])
-    return out + [""] + notes
+    return out + notes
 
 
 def t_sim3_cholmod(results):
@@ -364,24 +363,25 @@ def main():
         doc = f.read()
     new, missing = doc, []
     for name, text in generated.items():
-        pat = re.compile(rf"(<!-- bench_tables:{name} -->\n).*?(\n<!-- /bench_tables:{name} -->)",
+        pat = re.compile(rf"(<!-- bench_tables:{name} -->\n)(?:.*?\n)?(<!-- /bench_tables:{name} -->)",
                          re.S)
         if not pat.search(new):
             missing.append(name)
             continue
-        new = pat.sub(lambda m: m.group(1) + text + m.group(2), new)
+        new = pat.sub(lambda m: m.group(1) + text + "\n" + m.group(2), new)
     for name in missing:
         print(f"bench_tables: {md} has no block for '{name}'", file=sys.stderr)
+    rc = 1 if missing else 0
     if args.check:
         if new != doc:
             print(f"bench_tables: {md} is out of date; run scripts/bench_tables.py --write {md}",
                   file=sys.stderr)
             return 1
-        return 0
+        return rc
     if new != doc:
         with open(md, "w") as f:
             f.write(new)
-    return 0
+    return rc
 
 
 if __name__ == "__main__":
