@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <geodrift/correction/corrector.hpp>
 #include <geodrift/correction/replay.hpp>
+#include <geodrift/correction/uncertainty.hpp>
 #include <geodrift/error.hpp>
 #include <geodrift/geo/local_frame.hpp>
 #include <geodrift/io/anchors.hpp>
@@ -93,15 +94,20 @@ options
                       scalar residuals); default 1, must be >= 0 (0: the solver's own limits)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
+  --no-uncertainty    skip the per-keyframe uncertainty (sd_east/sd_north/cov_en left empty):
+                      it costs one more factorisation of the whole path per iteration of its
+                      variance estimate (correction/uncertainty.hpp)
   --help              this text
 
 outputs in DIR (every file states frame, units and the geodrift version)
   trajectory.csv      every input pose: frame, timestamp, kind (keyframe|interpolated), x,y,z in
-                      W, UTM, latitude/longitude/height, heading_deg, after_last_anchor
+                      W, UTM, latitude/longitude/height, heading_deg, after_last_anchor,
+                      sd_east, sd_north, cov_en (horizontal uncertainty, metres / m²; an
+                      interpolated pose carries its keyframe's)
   trajectory_kitti.txt, trajectory_tum.txt   corrected path in W (camera-to-world, for evo)
   track.geojson, track.kml                   path + anchors (WGS84)
   points.ply          corrected map points in W (with --map)
-  topview.svg         corrected path and anchors, top view
+  topview.svg         corrected path, anchors and 95 % uncertainty ellipses, top view
   scale.svg           local scale of the corrected keyframes (no ground truth here)
   report.json         version, command line, parameters, INIT result, per-step timings
 )";
@@ -176,7 +182,7 @@ int run_correct(int argc, char** argv) {
                   {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
                    "keyframe-step", "links", "weights", "first-window", "min-window-keyframes",
                    "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
-                  {"help", "force", "gate-anchors"});
+                  {"help", "force", "gate-anchors", "no-uncertainty"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -387,6 +393,18 @@ int run_correct(int argc, char** argv) {
                 " after INIT were rejected as inconsistent with the path INIT's anchors give "
                 "(wrong INIT anchors, a broken trajectory, or anchors of another place): no "
                 "trustworthy result, nothing written");
+  // ---- uncertainty of the corrected path (correction/uncertainty.hpp) ---------------------
+  correction::PathUncertainty unc;
+  if (!args.flag("no-uncertainty")) {
+    unc = correction::estimate_path_uncertainty(corrector);
+    if (!unc.ok)
+      std::fprintf(stderr, "geodrift correct: warning: no uncertainty estimate: %s\n",
+                   unc.message.c_str());
+    else if (!unc.message.empty())
+      std::fprintf(stderr, "geodrift correct: uncertainty: %s\n", unc.message.c_str());
+  } else {
+    unc.message = "skipped (--no-uncertainty)";
+  }
   std::size_t last_anchor_index = 0;
   for (std::size_t j = 0; j < anchors.size(); ++j)
     if (used[j]) last_anchor_index = std::max(last_anchor_index, locs[j].index);
@@ -410,6 +428,7 @@ int run_correct(int argc, char** argv) {
     rows[p].keyframe = kf_at[p] >= 0;
     rows[p].T_cw = T;
     rows[p].after_last_anchor = p > last_anchor_index;
+    if (unc.ok) rows[p].cov_en = unc.cov_en[k];
     io::TrajectoryPose tp = traj.poses[p];
     tp.T_cw = T;
     out_traj.poses.push_back(tp);
@@ -438,8 +457,17 @@ int run_correct(int argc, char** argv) {
                                   anchors[j].y_w.head<2>(), "#d62728"}
                   : io::SvgMarker{"REJECTED anchor line " + std::to_string(anchors[j].line),
                                   anchors[j].y_w.head<2>(), "#7f7f7f"});
+    // At most about 150 ellipses: every n-th keyframe and the last one.
+    std::vector<io::SvgEllipse> ellipses;
+    if (unc.ok) {
+      const std::size_t every = std::max<std::size_t>(1, (nk + 149) / 150);
+      for (std::size_t i = 0; i < nk; ++i)
+        if (i % every == 0 || i + 1 == nk)
+          ellipses.push_back(
+              {corrector.keyframe_center_w(static_cast<int>(i)).head<2>(), unc.cov_en[i]});
+    }
     io::write_svg_topview(out.path("topview.svg"), {path}, markers,
-                          "geodrift correct: corrected path (top view)", note);
+                          "geodrift correct: corrected path (top view)", note, "anchors", ellipses);
   }
   {
     // Without ground truth: the local scale s_i of the corrected Sim3 keyframe poses (M units
@@ -526,7 +554,21 @@ int run_correct(int argc, char** argv) {
       << ", \"rms_m\": " << json_num(ir.rms_m) << ", \"inliers\": " << ir.inliers.size()
       << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
       << ",\n  \"anchor_residuals_m\": " << residuals
-      << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor()) << ",\n  \"anchors\": [";
+      << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor());
+    {
+      std::vector<double> sd;
+      for (const auto& C : unc.cov_en) sd.push_back(std::sqrt(C.trace()));
+      std::sort(sd.begin(), sd.end());
+      j << ",\n  \"uncertainty\": {\"ok\": " << (unc.ok ? "true" : "false")
+        << ", \"message\": " << io::detail::json_string(unc.message)
+        << ", \"drift_variance_factor\": " << json_num(unc.ok ? unc.drift_factor : NAN)
+        << ", \"anchor_variance_factor\": " << json_num(unc.ok ? unc.anchor_factor : NAN)
+        << ", \"redundancy\": " << json_num(unc.ok ? unc.redundancy : NAN)
+        << ", \"median_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd[sd.size() / 2])
+        << ", \"max_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd.back())
+        << ", \"seconds\": " << json_num(unc.ok ? unc.seconds : NAN) << "}";
+    }
+    j << ",\n  \"anchors\": [";
     for (std::size_t d = 0; d < decisions.size(); ++d) {
       const auto& x = decisions[d];
       const io::Anchor& a = anchors[x.id];

@@ -20,6 +20,7 @@
 #include "cli_util.hpp"
 #include "commands.hpp"
 #include "geodrift/correction/replay.hpp"
+#include "geodrift/correction/uncertainty.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/eval/scale_factor.hpp"
 #include "geodrift/geo/kitti.hpp"
@@ -89,6 +90,10 @@ struct Cell {
   std::vector<double> clean;   // with --wrong-anchors: the same run with clean anchors
   int rejected_wrong = 0, wrong = 0, rejected_right = 0, right = 0;  // anchors after INIT
   double seconds = 0;  // correction time summed over seeds
+  // Uncertainty (correction/uncertainty.hpp), per seed: the fraction of keyframes whose true
+  // position lies in their 95 % ellipse, and the estimated drift factor k.
+  std::vector<double> coverage, drift_factor;
+  int uncertainty_failed = 0;
 };
 
 /// How the experiment's runs are set up (the command's options).
@@ -198,6 +203,15 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
           const auto est = centres(c);
           err = eval::horizontal_errors(est, s.gt_center_w).all.mean;
           if (main_run && first_seed && intervals[ii] == plot_interval) plot[m] = est;
+          if (main_run) {
+            const correction::PathUncertainty u = correction::estimate_path_uncertainty(c);
+            if (u.ok) {
+              cell.coverage.push_back(eval::ellipse_coverage(est, s.gt_center_w, u.cov_en));
+              cell.drift_factor.push_back(u.drift_factor);
+            } else {
+              ++cell.uncertainty_failed;
+            }
+          }
         }
         if (main_run) {
           for (const auto& r : c.reports()) cell.seconds += r.seconds;
@@ -226,6 +240,9 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
     Cell& c = res->cells[k];
     c.values.insert(c.values.end(), v.values.begin(), v.values.end());
     c.clean.insert(c.clean.end(), v.clean.begin(), v.clean.end());
+    c.coverage.insert(c.coverage.end(), v.coverage.begin(), v.coverage.end());
+    c.drift_factor.insert(c.drift_factor.end(), v.drift_factor.begin(), v.drift_factor.end());
+    c.uncertainty_failed += v.uncertainty_failed;
     c.seconds += v.seconds;
     c.wrong += v.wrong;
     c.right += v.right;
@@ -407,6 +424,34 @@ int run_experiment(int argc, char** argv) {
       }
       md << "\n\n";
     }
+    md << "Uncertainty (correction/uncertainty.hpp): keyframes whose true position lies inside "
+          "their 95 % ellipse [%], mean over seeds (min–max), and the estimated drift factor k "
+          "(median):\n\n| method |";
+    for (int n : intervals) md << " " << n << " |";
+    md << "\n|---|";
+    for (std::size_t i = 0; i < intervals.size(); ++i) md << "---|";
+    md << "\n";
+    for (int m = 0; m < kNumMethods; ++m) {
+      if (!r.cells.count({m, 0})) continue;
+      md << "| " << kMethods[m].name << " |";
+      for (std::size_t i = 0; i < intervals.size(); ++i) {
+        const Cell& c = r.cells.at({m, static_cast<int>(i)});
+        std::vector<double> k = c.drift_factor;
+        std::sort(k.begin(), k.end());
+        char b[128];
+        if (c.coverage.empty())
+          std::snprintf(b, sizeof b, " — |");
+        else
+          std::snprintf(b, sizeof b, " %.1f (%.1f–%.1f), k %.3g |", 100 * mean(c.coverage),
+                        100 * *std::min_element(c.coverage.begin(), c.coverage.end()),
+                        100 * *std::max_element(c.coverage.begin(), c.coverage.end()),
+                        k[k.size() / 2]);
+        md << b;
+        if (c.uncertainty_failed) md << " (" << c.uncertainty_failed << " failed)";
+      }
+      md << "\n";
+    }
+    md << "\n";
     md << "Correction time per seed (all correspondences of the whole sequence) [s]: ";
     for (int m = 0; m < kNumMethods; ++m) {
       if (!r.cells.count({m, 0})) continue;

@@ -1,6 +1,7 @@
 // The corrected path does not depend on the map's unit, origin or orientation (issue 24, item 1;
 // DESIGN.md "Correction" 5): a monocular map's unit is arbitrary, so the same reconstruction
-// handed over in another similarity frame must give the same path in W.
+// handed over in another similarity frame must give the same path in W. Also here (one heavy
+// translation unit fewer): the calibration of the path's uncertainty (correction/uncertainty.hpp).
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -8,6 +9,8 @@
 #include <string>
 
 #include "geodrift/correction/replay.hpp"
+#include "geodrift/correction/uncertainty.hpp"
+#include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
 
@@ -101,4 +104,137 @@ TEST_CASE(
       }
     }
   }
+}
+
+// ---- Uncertainty of the corrected path (issue 24 item 4, correction/uncertainty.hpp) ---------
+// When the data follow the drift model exactly (with a variance factor the estimator is not
+// told), the reported covariances must be calibrated: the drift-model estimate lies inside its
+// 95 % ellipse for about 95 % of keyframes, and the factor is recovered.
+namespace {
+
+struct ModelRun {
+  map::Map m;
+  std::vector<map::Correspondence> corr;
+  std::vector<Eigen::Vector3d> truth;  // camera centres in W
+};
+
+/// A planar drive of `n` 3 m steps with 90° turns every 60 steps, seen by a monocular VO whose
+/// step errors are drawn from DriftModel × k_true (rotation, log-scale, direction), in a map of
+/// 0.1 units per metre; anchors every 25 keyframes at the true centre + N(0, σ²), σ = 0.1 m.
+ModelRun model_run(unsigned seed, double k_true, int n = 300) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01(0.0, 1.0);
+  const correction::DriftModel model;
+  ModelRun r;
+  map::Camera cam;
+  cam.fx = cam.fy = 700;
+  cam.cx = 620;
+  cam.cy = 188;
+  cam.width = 1241;
+  cam.height = 376;
+  r.m.cameras.push_back(cam);
+  std::vector<lie::SE3d> T_wc(n);
+  double psi = 0;
+  Eigen::Vector3d p(0, 0, 0);
+  for (int i = 0; i < n; ++i) {
+    if (i > 0) {
+      const int phase = i % 60;
+      if (phase >= 10 && phase < 20) psi += (seed % 2 ? 1 : -1) * M_PI / 20;  // 90° over 10
+      p += 3.0 * Eigen::Vector3d(std::cos(psi), std::sin(psi), 0.0);
+    }
+    Eigen::Matrix3d R;
+    R.col(2) = Eigen::Vector3d(std::cos(psi), std::sin(psi), 0);
+    R.col(1) = Eigen::Vector3d(0, 0, -1);
+    R.col(0) = R.col(1).cross(R.col(2));
+    T_wc[i] = lie::SE3d(lie::SO3d(Eigen::Quaterniond(R)), p);
+    r.truth.push_back(p);
+  }
+  // The VO's chain in M: T^M_wc(i) = T^M_wc(i−1)·[Exp(δω)·R_rel | s_i·(t_rel + δt)].
+  double log_s = std::log(0.1);
+  lie::SE3d Tm = lie::SE3d(lie::SO3d(), Eigen::Vector3d::Zero());
+  for (int i = 0; i < n; ++i) {
+    if (i > 0) {
+      const lie::SE3d rel = T_wc[i - 1].inverse() * T_wc[i];
+      const double d = rel.translation().norm(), turn = rel.rotation().log().norm();
+      const Eigen::Matrix<double, 7, 1> sd = model.sd(d, turn, 1.0);  // metres
+      const double f = std::sqrt(k_true);
+      const Eigen::Vector3d w(f * sd[0] * N01(rng), f * sd[1] * N01(rng), f * sd[2] * N01(rng));
+      log_s += f * sd[3] * N01(rng);
+      const Eigen::Vector3d dt(f * sd[4] * N01(rng), f * sd[5] * N01(rng), f * sd[6] * N01(rng));
+      const lie::SE3d noisy(lie::SO3d::exp(w) * rel.rotation(),
+                            std::exp(log_s) * (rel.translation() + dt));
+      Tm = Tm * noisy;
+    }
+    map::Keyframe kf;
+    kf.id = i;
+    kf.frame_index = 3 * i;
+    kf.T_cw = Tm.inverse();
+    r.m.keyframes.push_back(kf);
+  }
+  const double sigma = 0.1;
+  for (int i = 0, id = 0; i < n; i += 25, ++id) {
+    map::Correspondence c;
+    c.id = id;
+    c.keyframe = i;
+    c.T_vk = lie::SE3d(lie::SO3d(), Eigen::Vector3d::Zero());
+    c.y_w = r.truth[i] + sigma * Eigen::Vector3d(N01(rng), N01(rng), N01(rng));
+    c.sigma_m = sigma;
+    r.corr.push_back(c);
+  }
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
+          "[correction][uncertainty]") {
+  const double k_true = 4.0;  // the data drift 4x (in variance) more than the nominal model
+  std::vector<double> coverage, k_est, ka_est;
+  int ok = 0;
+  for (unsigned seed = 1; seed <= 24; ++seed) {
+    const ModelRun r = model_run(seed, k_true);
+    correction::CorrectorOptions opt;
+    opt.mode = correction::Mode::kInitPgo;
+    opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kDriftModel;
+    correction::Corrector corrector(opt);
+    correction::replay(r.m, r.corr, &corrector);
+    REQUIRE(corrector.initialized());
+    const correction::PathUncertainty u = correction::estimate_path_uncertainty(corrector);
+    INFO("seed " << seed << ": " << u.message);
+    REQUIRE(u.ok);
+    ++ok;
+    REQUIRE(u.cov_en.size() == r.truth.size());
+    coverage.push_back(eval::ellipse_coverage(u.map_estimate_w, r.truth, u.cov_en));
+    k_est.push_back(u.drift_factor);
+    ka_est.push_back(u.anchor_factor);
+    // Every covariance is a proper one, and uncertainty grows away from the anchors.
+    for (const auto& C : u.cov_en) {
+      REQUIRE(C.allFinite());
+      REQUIRE(C.determinant() > 0);
+    }
+    REQUIRE(u.cov_en[12].trace() > 2 * u.cov_en[0].trace());  // mid-gap vs at an anchor
+  }
+  std::sort(k_est.begin(), k_est.end());
+  double mean_cov = 0;
+  for (double c : coverage) mean_cov += c / coverage.size();
+  INFO("mean coverage " << mean_cov << ", median k " << k_est[k_est.size() / 2]);
+  CHECK(mean_cov > 0.90);
+  CHECK(mean_cov < 0.99);
+  // k with redundancy ≈ 3·12 − 7 per run: relative SD ≈ √(2/29) ≈ 0.26; the median of 24 runs
+  // within ±35 % of the truth.
+  CHECK(k_est[k_est.size() / 2] > 0.65 * k_true);
+  CHECK(k_est[k_est.size() / 2] < 1.35 * k_true);
+}
+
+TEST_CASE("ellipse_coverage counts errors inside the probability ellipse", "[eval][uncertainty]") {
+  const std::vector<Eigen::Vector3d> gt(3, Eigen::Vector3d::Zero());
+  // Σ = diag(4, 1): the 95 % ellipse has semi-axes √5.991·(2, 1) = (4.895, 2.448).
+  const Eigen::Matrix2d S = (Eigen::Matrix2d() << 4, 0, 0, 1).finished();
+  const std::vector<Eigen::Vector3d> est = {Eigen::Vector3d(4.8, 0, 0), Eigen::Vector3d(0, 2.5, 0),
+                                            Eigen::Vector3d(3, 1.5, 7)};
+  // (3, 1.5): 9/4 + 2.25 = 4.5 < 5.991 (z is ignored).
+  CHECK(eval::ellipse_coverage(est, gt, {S, S, S}) == Approx(2.0 / 3.0));
+  CHECK(eval::ellipse_coverage(est, gt, {S, S, Eigen::Matrix2d::Zero()}) == Approx(1.0 / 3.0));
+  CHECK_THROWS_AS(eval::ellipse_coverage(est, gt, {S}), InvalidArgument);
+  CHECK_THROWS_AS(eval::ellipse_coverage(est, gt, {S, S, S}, 1.0), InvalidArgument);
 }

@@ -233,11 +233,32 @@ TEST_CASE("PLY and trajectory.csv readers report the path, line and problem",
   p = file(dir, "bad_header.csv", "# x\nframe,x,y\n");
   require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "header is not trajectory.csv's");
   p = file(dir, "short.csv", cols + "\n0,0.1,keyframe,1,2,3\n");
-  require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "6 fields, expected 14");
-  p = file(dir, "kind.csv", cols + "\n0,0.1,frame,1,2,3,500001,5400002,32N,49,8.4,100,10,0\n");
+  require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "6 fields, expected 17");
+  p = file(dir, "kind.csv", cols + "\n0,0.1,frame,1,2,3,500001,5400002,32N,49,8.4,100,10,0,,,\n");
   require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "kind 'frame'");
-  p = file(dir, "zone.csv", cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32X,49,8.4,100,10,0\n");
+  p = file(dir, "zone.csv",
+           cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32X,49,8.4,100,10,0,,,\n");
   require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "zone '32X'");
-  p = file(dir, "nan.csv", cols + "\n0,0.1,keyframe,1,nan,3,500001,5400002,32N,49,8.4,100,10,0\n");
+  p = file(dir, "nan.csv",
+           cols + "\n0,0.1,keyframe,1,nan,3,500001,5400002,32N,49,8.4,100,10,0,,,\n");
   require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "y 'nan' is not finite");
+  p = file(dir, "sd.csv",
+           cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32N,49,8.4,100,10,0,-1,2,0\n");
+  require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "sd_east/sd_north is negative");
+  p = file(dir, "sdnan.csv",
+           cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32N,49,8.4,100,10,0,1,x,0\n");
+  require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "sd_north");
+  // A file written before the uncertainty columns existed (14 columns) is still read; a row
+  // of the new width under the old header is not.
+  std::string old_cols;
+  for (std::size_t i = 0; i < io::kTrajectoryCsvColumnsWithoutUncertainty; ++i)
+    old_cols += (i ? "," : "") + io::trajectory_csv_columns()[i];
+  p = file(dir, "old.csv",
+           old_cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32N,49,8.4,100,10,0\n");
+  const auto old = io::read_trajectory_csv(p);
+  REQUIRE(old.size() == 1);
+  CHECK(std::isnan(old[0].sd_east));
+  p = file(dir, "oldwide.csv",
+           old_cols + "\n0,0.1,keyframe,1,2,3,500001,5400002,32N,49,8.4,100,10,0,1,1,0\n");
+  require_parse_error([&] { io::read_trajectory_csv(p); }, p, 2, "17 fields, expected 14");
 }

@@ -368,6 +368,8 @@ TEST_CASE("trajectory.csv round trips with UTM, latitude/longitude and heading",
     const double heading = 0.2 * i;  // true heading of a level camera
     const Eigen::Matrix3d R_wc = frame.level_camera_rotation_from_heading(heading, c);
     r.T_cw = lie::SE3d(lie::SO3d(Eigen::Matrix3d(R_wc)), c).inverse();
+    if (i % 4 != 3)  // some rows without an uncertainty estimate
+      r.cov_en << 0.04 * (i + 1), 0.01 * i, 0.01 * i, 0.09 * (i + 1);
     rows.push_back(r);
   }
   const std::string path = dir.file("trajectory.csv");
@@ -392,6 +394,14 @@ TEST_CASE("trajectory.csv round trips with UTM, latitude/longitude and heading",
     CHECK(back[i].heading_deg == Approx(0.2 * static_cast<double>(i) * 180.0 / kPi).margin(1e-5));
     CHECK(back[i].keyframe == rows[i].keyframe);
     CHECK(back[i].after_last_anchor == rows[i].after_last_anchor);
+    if (i % 4 != 3) {
+      CHECK(back[i].sd_east == Approx(0.2 * std::sqrt(i + 1.0)).margin(1e-4));
+      CHECK(back[i].sd_north == Approx(0.3 * std::sqrt(i + 1.0)).margin(1e-4));
+      CHECK(back[i].cov_en == Approx(0.01 * static_cast<double>(i)).epsilon(1e-3));
+    } else {
+      CHECK(std::isnan(back[i].sd_east));
+      CHECK(std::isnan(back[i].cov_en));
+    }
     CHECK(std::isnan(back[i].timestamp) == std::isnan(rows[i].timestamp));
     CHECK(back[i].line == static_cast<int>(i) + 3);
   }

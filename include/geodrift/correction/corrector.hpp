@@ -547,6 +547,12 @@ class Corrector {
   /// Why INIT has not succeeded yet (empty when it has, or was not tried).
   const std::string& init_message() const { return init_message_; }
   const InitResult& init_result() const { return init_; }
+  /// Map units per metre for the drift model's distances: INIT's similarity, one number for the
+  /// whole path. Not the keyframes' current scales: a window drawn to a wrong anchor can shrink
+  /// or blow up a keyframe's scale, and weights taken from it would feed that back into every
+  /// later window. The local scale drift (tens of %) matters little to a variance that grows
+  /// with distance. Scales with the map's unit, so the weights stay unit-free.
+  double map_per_metre() const { return 1.0 / init_.S_wm.scale(); }
 
   int num_keyframes() const { return static_cast<int>(kfs_.size()); }
   int num_points() const { return static_cast<int>(pts_.size()); }
@@ -616,13 +622,6 @@ class Corrector {
     if (!options_.weight_by_localization || !c.has_pose_covariance()) return tag;
     return effective_geo_sd_m(tag, localization_sd_m(c.pose_cov, S_[k].scale()));
   }
-
-  /// Map units per metre for the drift model's distances: INIT's similarity, one number for the
-  /// whole path. Not the keyframes' current scales: a window drawn to a wrong anchor can shrink
-  /// or blow up a keyframe's scale, and weights taken from it would feed that back into every
-  /// later window. The local scale drift (tens of %) matters little to a variance that grows
-  /// with distance. Scales with the map's unit, so the weights stay unit-free.
-  double map_per_metre() const { return 1.0 / init_.S_wm.scale(); }
 
   /// Standard deviations (ω, σ, ν) of a relative-pose measurement dS = S_j·S_i⁻¹ under the drift
   /// model, ν in map units (its length is the raw edge's), distances at `map_per_metre`.

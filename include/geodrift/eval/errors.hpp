@@ -96,6 +96,37 @@ inline HorizontalErrorReport horizontal_errors(
   return r;
 }
 
+/// Calibration of horizontal covariances: the fraction of keyframes (with ground truth) whose
+/// true position lies inside the estimate's `probability` ellipse, i.e. whose error d (2D, in
+/// W) has dᵀ·Σ⁻¹·d ≤ χ²₂(probability) = −2·ln(1 − probability). A calibrated Σ gives about
+/// `probability`. Keyframes whose Σ is not positive definite count as outside.
+/// @throws InvalidArgument on size mismatch or a probability outside (0, 1).
+inline double ellipse_coverage(const std::vector<Eigen::Vector3d>& est_w,
+                               const std::vector<Eigen::Vector3d>& gt_w,
+                               const std::vector<Eigen::Matrix2d>& cov_en,
+                               double probability = 0.95) {
+  GEODRIFT_CHECK(est_w.size() == gt_w.size() && est_w.size() == cov_en.size(),
+                 "ellipse_coverage: " << est_w.size() << " estimates, " << gt_w.size()
+                                      << " ground-truth entries, " << cov_en.size()
+                                      << " covariances");
+  GEODRIFT_CHECK(probability > 0 && probability < 1,
+                 "ellipse_coverage: probability " << probability << " is not in (0, 1)");
+  const double gate = -2.0 * std::log(1.0 - probability);
+  int in = 0, n = 0;
+  for (std::size_t i = 0; i < est_w.size(); ++i) {
+    if (!has_ground_truth(gt_w[i])) continue;
+    ++n;
+    const Eigen::Matrix2d& S = cov_en[i];
+    const double det = S(0, 0) * S(1, 1) - S(0, 1) * S(1, 0);
+    if (!(S(0, 0) > 0 && det > 0) || !S.allFinite()) continue;
+    const Eigen::Vector2d d = (est_w[i] - gt_w[i]).head<2>();
+    const double m2 =
+        (S(1, 1) * d.x() * d.x() - 2 * S(0, 1) * d.x() * d.y() + S(0, 0) * d.y() * d.y()) / det;
+    in += m2 <= gate;
+  }
+  return n ? static_cast<double>(in) / n : std::numeric_limits<double>::quiet_NaN();
+}
+
 /// DESIGN.md "Global Sim3 error": Umeyama Sim(3) alignment (3D) of all uncorrected keyframe
 /// centres to ground truth, then the 2D error of the aligned centres.
 struct GlobalSim3Error {

@@ -16,6 +16,9 @@
 ///   heading_deg      true heading of the optical axis, degrees clockwise from true north in
 ///                    [0, 360) (empty when the axis is vertical)
 ///   after_last_anchor  1 for frames after the last anchor (extrapolated), else 0
+///   sd_east,sd_north,cov_en  horizontal uncertainty of the camera centre in W (x east, y north):
+///                    standard deviations (metres) and the east–north covariance (m²) of the
+///                    1-σ ellipse (correction/uncertainty.hpp); empty when not estimated
 /// read_trajectory_csv() reads the file back (tests, `geodrift eval`).
 
 #include <Eigen/Core>
@@ -40,6 +43,9 @@ struct TrajectoryCsvRow {
   bool keyframe = true;            ///< false: interpolated between keyframes
   lie::SE3d T_cw;                  ///< W -> camera (metres)
   bool after_last_anchor = false;  ///< extrapolated beyond the last anchor
+  /// Horizontal covariance of the camera centre in W (x east, y north; m²), written as
+  /// sd_east, sd_north, cov_en; NaN (empty fields) when not estimated.
+  Eigen::Matrix2d cov_en = Eigen::Matrix2d::Constant(std::numeric_limits<double>::quiet_NaN());
 };
 
 /// One row as read back from trajectory.csv.
@@ -54,16 +60,23 @@ struct TrajectoryCsvRecord {
   double latitude_deg = 0, longitude_deg = 0, height = 0;
   double heading_deg = std::numeric_limits<double>::quiet_NaN();
   bool after_last_anchor = false;
+  /// NaN when the file has no uncertainty (empty fields, or a file from before geodrift wrote
+  /// these columns).
+  double sd_east = std::numeric_limits<double>::quiet_NaN();
+  double sd_north = std::numeric_limits<double>::quiet_NaN();
+  double cov_en = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// The trajectory.csv column names, in order.
 inline const std::vector<std::string>& trajectory_csv_columns() {
   static const std::vector<std::string> kCols = {
-      "frame",       "timestamp",        "kind", "x",        "y",         "z",
-      "easting",     "northing",         "zone", "latitude", "longitude", "height",
-      "heading_deg", "after_last_anchor"};
+      "frame",       "timestamp",         "kind",    "x",        "y",         "z",
+      "easting",     "northing",          "zone",    "latitude", "longitude", "height",
+      "heading_deg", "after_last_anchor", "sd_east", "sd_north", "cov_en"};
   return kCols;
 }
+/// Columns of trajectory.csv before the uncertainty columns (still read).
+constexpr std::size_t kTrajectoryCsvColumnsWithoutUncertainty = 14;
 
 /// Writes trajectory.csv atomically (see the file comment).
 /// @param path   output file.
@@ -116,7 +129,15 @@ inline void write_trajectory_csv(const std::string& path, const std::vector<Traj
          << detail::fmt_fixed(o.g.latitude_deg, 10) << ','
          << detail::fmt_fixed(o.g.longitude_deg, 10) << ',' << detail::fmt_fixed(o.g.height, 6)
          << ',' << (std::isfinite(o.heading_deg) ? detail::fmt_fixed(o.heading_deg, 6) : "") << ','
-         << (r.after_last_anchor ? 1 : 0) << '\n';
+         << (r.after_last_anchor ? 1 : 0);
+      const bool has_cov = r.cov_en.allFinite() && r.cov_en(0, 0) >= 0 && r.cov_en(1, 1) >= 0;
+      if (has_cov)
+        os << ',' << detail::fmt_fixed(std::sqrt(r.cov_en(0, 0)), 4) << ','
+           << detail::fmt_fixed(std::sqrt(r.cov_en(1, 1)), 4) << ','
+           << detail::fmt(0.5 * (r.cov_en(0, 1) + r.cov_en(1, 0)), 4);
+      else
+        os << ",,,";
+      os << '\n';
     }
   });
 }
@@ -129,6 +150,7 @@ inline std::vector<TrajectoryCsvRecord> read_trajectory_csv(const std::string& p
   std::vector<TrajectoryCsvRecord> out;
   const auto& cols = trajectory_csv_columns();
   bool header = false;
+  std::size_t ncols = cols.size();
   std::string raw;
   while (reader.next(&raw)) {
     const std::string text = detail::trim(raw);
@@ -136,7 +158,10 @@ inline std::vector<TrajectoryCsvRecord> read_trajectory_csv(const std::string& p
     const int line = reader.line();
     const std::vector<std::string> f = detail::split_csv(text);
     if (!header) {
-      if (f != cols) {
+      const std::vector<std::string> old(cols.begin(),
+                                         cols.begin() + kTrajectoryCsvColumnsWithoutUncertainty);
+      if (f == old) ncols = old.size();
+      if (f != cols && f != old) {
         std::string expected;
         for (std::size_t i = 0; i < cols.size(); ++i) expected += (i ? "," : "") + cols[i];
         detail::parse_error(path, line, "header is not trajectory.csv's: expected " + expected);
@@ -144,10 +169,10 @@ inline std::vector<TrajectoryCsvRecord> read_trajectory_csv(const std::string& p
       header = true;
       continue;
     }
-    if (f.size() != cols.size())
-      detail::parse_error(path, line,
-                          "row has " + std::to_string(f.size()) + " fields, expected " +
-                              std::to_string(cols.size()));
+    if (f.size() != ncols)
+      detail::parse_error(
+          path, line,
+          "row has " + std::to_string(f.size()) + " fields, expected " + std::to_string(ncols));
     TrajectoryCsvRecord r;
     r.line = line;
     r.frame = static_cast<int>(detail::parse_int(f[0], path, line, "frame", 0));
@@ -173,6 +198,13 @@ inline std::vector<TrajectoryCsvRecord> read_trajectory_csv(const std::string& p
     r.height = detail::parse_double(f[11], path, line, "height");
     if (!f[12].empty()) r.heading_deg = detail::parse_double(f[12], path, line, "heading_deg");
     r.after_last_anchor = detail::parse_int(f[13], path, line, "after_last_anchor", 0, 1) == 1;
+    if (ncols > kTrajectoryCsvColumnsWithoutUncertainty) {
+      if (!f[14].empty()) r.sd_east = detail::parse_double(f[14], path, line, "sd_east");
+      if (!f[15].empty()) r.sd_north = detail::parse_double(f[15], path, line, "sd_north");
+      if (!f[16].empty()) r.cov_en = detail::parse_double(f[16], path, line, "cov_en");
+      if (r.sd_east < 0 || r.sd_north < 0)
+        detail::parse_error(path, line, "sd_east/sd_north is negative");
+    }
     out.push_back(r);
   }
   if (!header) detail::parse_error(path, reader.line(), "no header row");

@@ -10,6 +10,7 @@
 /// "nice" numbers (1, 2, 5 × 10^k).
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -37,6 +38,13 @@ struct SvgMarker {
   std::string label;
   Eigen::Vector2d position = Eigen::Vector2d::Zero();
   std::string color = "#d62728";
+};
+
+/// An uncertainty ellipse: the `probability` region of a 2D Gaussian with covariance `cov`
+/// (m²) centred at `centre`, e.g. a keyframe's horizontal position uncertainty.
+struct SvgEllipse {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
 };
 
 namespace detail {
@@ -172,6 +180,7 @@ inline void svg_end(std::ostream& os, double h, const std::string& desc) {
 /// @param paths       polylines in (x, y) of W.
 /// @param markers     labelled points in (x, y) of W; the legend shows one entry
 ///                    `marker_label` for all of them when non-empty.
+/// @param ellipses    uncertainty ellipses (drawn under the paths) at `ellipse_probability`.
 /// @param title       plot title.
 /// @param frame_note  statement of the frame (e.g. "W = UTM 32N shifted to ..."), written in
 ///                    <desc> and the footer with the geodrift version and units.
@@ -179,7 +188,9 @@ inline void svg_end(std::ostream& os, double h, const std::string& desc) {
 inline void write_svg_topview(const std::string& path, const std::vector<SvgSeries>& paths,
                               const std::vector<SvgMarker>& markers, const std::string& title,
                               const std::string& frame_note,
-                              const std::string& marker_label = "anchors") {
+                              const std::string& marker_label = "anchors",
+                              const std::vector<SvgEllipse>& ellipses = {},
+                              double ellipse_probability = 0.95) {
   const Eigen::Vector4d bb = detail::data_bounds(paths, markers, "write_svg_topview");
   // Equal aspect: fit the larger span into a 760 px square-ish area.
   const double dx = bb[1] - bb[0], dy = bb[3] - bb[2];
@@ -194,6 +205,25 @@ inline void write_svg_topview(const std::string& path, const std::vector<SvgSeri
   detail::write_atomically(path, [&](std::ostream& os) {
     detail::svg_begin(os, W, H, title, desc);
     detail::svg_axes(os, b, "x (east) [m]", "y (north) [m]");
+    // Ellipses under the paths: semi-axes √(χ²₂(p)·λ) along Σ's eigenvectors; SVG's y grows
+    // downwards, so the angle changes sign. Non-finite or non-positive Σ are skipped.
+    const double k2 = -2.0 * std::log(1.0 - ellipse_probability);
+    for (const SvgEllipse& e : ellipses) {
+      if (!e.cov.allFinite() || !e.centre.allFinite()) continue;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(0.5 * (e.cov + e.cov.transpose()));
+      if (!(es.eigenvalues()[0] >= 0)) continue;
+      const Eigen::Vector2d major = es.eigenvectors().col(1);
+      const double deg = std::atan2(major.y(), major.x()) * 180.0 / M_PI;
+      const double rx = std::sqrt(k2 * es.eigenvalues()[1]) * scale;
+      const double ry = std::sqrt(k2 * es.eigenvalues()[0]) * scale;
+      const double cx = b.px(e.centre.x()), cy = b.py(e.centre.y());
+      os << "<ellipse cx=\"" << detail::fmt(cx, 8) << "\" cy=\"" << detail::fmt(cy, 8) << "\" rx=\""
+         << detail::fmt(std::max(rx, 0.3), 6) << "\" ry=\"" << detail::fmt(std::max(ry, 0.3), 6)
+         << "\" transform=\"rotate(" << detail::fmt(-deg, 6) << " " << detail::fmt(cx, 8) << " "
+         << detail::fmt(cy, 8)
+         << ")\" fill=\"#ff7f0e\" fill-opacity=\"0.15\" stroke=\"#ff7f0e\" "
+            "stroke-width=\"0.5\"/>\n";
+    }
     detail::svg_series(os, b, paths);
     for (const SvgMarker& m : markers)
       os << "<circle cx=\"" << detail::fmt(b.px(m.position.x()), 8) << "\" cy=\""
@@ -202,6 +232,17 @@ inline void write_svg_topview(const std::string& path, const std::vector<SvgSeri
          << "</title></circle>\n";
     detail::svg_legend(os, b.left + b.width + 16, b.top + 10, paths, !markers.empty(), marker_label,
                        markers.empty() ? "" : markers.front().color);
+    if (!ellipses.empty()) {
+      int rows = markers.empty() ? 0 : 1;
+      for (const SvgSeries& p : paths) rows += !p.label.empty();
+      const double ly = b.top + 10 + 18.0 * rows;
+      os << "<ellipse cx=\"" << detail::fmt(b.left + b.width + 28, 8) << "\" cy=\""
+         << detail::fmt(ly, 8)
+         << "\" rx=\"9\" ry=\"5\" fill=\"#ff7f0e\" fill-opacity=\"0.15\" stroke=\"#ff7f0e\"/>\n"
+         << "<text x=\"" << detail::fmt(b.left + b.width + 46, 8) << "\" y=\""
+         << detail::fmt(ly + 4, 8) << "\" font-size=\"12\">"
+         << detail::fmt(100 * ellipse_probability, 4) << " % ellipses</text>\n";
+    }
     detail::svg_end(os, H, desc);
   });
 }

@@ -1,0 +1,260 @@
+#pragma once
+
+/// @file
+/// Horizontal position uncertainty of a corrected path (issue 24 item 4): per keyframe, the
+/// 2×2 covariance of its camera centre in W (x = east, y = north of the UTM grid, metres).
+///
+/// ## Model
+/// The posterior of the keyframe poses given what the correction used, linearised at its
+/// optimum (the Laplace approximation), under the monocular drift model of
+/// correction/drift_model.hpp — the same for every correction mode, so the figure describes the
+/// data, not the estimator:
+///   - a Sim(3) chain over the keyframes: edge i−1→i measures the raw VO step
+///     ΔS_i = T_cw,i · T_cw,i−1⁻¹ with the drift model's information over the step's length and
+///     turn (a random walk: the VO's errors add in variance along the path, so only
+///     consecutive keyframes are linked; covisibility edges would count the same error twice);
+///   - per anchor in use (Corrector::correspondences()): a view node joined to its keyframe by
+///     the fixed offset T_vk (drift model over the offset, plus the view's PnP covariance
+///     where it has one) and a camera-centre prior at the geo-tag with σ = sigma_m.
+/// Σ = H⁻¹ from solver::Covariance at the optimum, Σ_c = (1/s²)·Rᵀ·Σ_νν·R per keyframe.
+///
+/// ## The drift level
+/// A VO's drift differs from the model's nominal numbers by a factor (camera, texture, speed).
+/// That factor k (a variance factor on every drift-model edge; the geo-tags' σ are taken as
+/// given) is estimated from the data by variance-component estimation (Helmert; Förstner 1979,
+/// "Ein Verfahren zur Schätzung von Varianz- und Kovarianzkomponenten"): the group of drift
+/// edges must explain its own weighted squared residuals with its own redundancy,
+///     k ← k · χ²_D / r_D,   r_D = (m − n) − r_A,   r_A = Σ_anchors (3 − tr(W_j·J_j·Σ_j·J_jᵀ)),
+/// iterated to a fixed point (m residuals, n free tangent columns). With fewer redundant
+/// anchor components than `min_redundancy` the nominal model (k = 1) is kept and said so.
+/// Nothing here changes the corrected path.
+
+#include <Eigen/Core>
+#include <Eigen/Dense>
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "geodrift/correction/corrector.hpp"
+#include "geodrift/solver/covariance.hpp"
+#include "geodrift/solver/levenberg_marquardt.hpp"
+#include "geodrift/solver/problem.hpp"
+#include "geodrift/solver/residuals/relative_pose.hpp"
+
+namespace geodrift::correction {
+
+struct PathUncertaintyOptions {
+  int max_iterations = 50;         ///< LM iterations per solve of the uncertainty graph
+  int max_factor_iterations = 50;  ///< variance-component iterations
+  /// Stop when both factors change by less than this fraction (or a quarter of their own
+  /// sampling error, if larger).
+  double factor_tolerance = 0.01;
+  /// Below this redundancy of the drift edges k is not estimated (stays 1).
+  double min_redundancy = 2.0;
+  bool estimate_variance_factors = true;
+  int num_threads = 1;
+};
+
+struct PathUncertainty {
+  bool ok = false;
+  std::string message;  ///< why not ok, or a note (k not estimated)
+  /// Per keyframe index: horizontal covariance of the camera centre in W (m²).
+  std::vector<Eigen::Matrix2d> cov_en;
+  /// Per keyframe index: the camera centre in W at the uncertainty graph's optimum (the
+  /// drift model's own estimate; the corrected path itself is the Corrector's).
+  std::vector<Eigen::Vector3d> map_estimate_w;
+  /// Variance factors of the drift model's components, data relative to the model: log-scale
+  /// (drift_factor), rotation and translation (direction) rows of the chain.
+  double drift_factor = 1.0;
+  double redundancy = 0;  ///< m − n of the uncertainty graph
+  double drift_redundancy = 0;
+  double rotation_factor = 1.0, translation_factor = 1.0;
+  double anchor_factor = 1.0;  ///< the anchors' variance relative to their stated σ and PnP
+  double anchor_redundancy = 0;
+  double chi2 = 0;  ///< 2·cost at the optimum (with k applied)
+  int factor_iterations = 0;
+  double seconds = 0;
+};
+
+namespace detail {
+
+/// Drift-model covariance (diagonal) of a relative Sim(3) measurement dS, in map units.
+inline Eigen::Matrix<double, 7, 7> drift_covariance(const DriftModel& model, const lie::Sim3d& dS,
+                                                    double map_per_metre) {
+  const Eigen::Matrix<double, 7, 1> sd =
+      model.sd(dS.translation().norm(), dS.rotation().log().norm(), map_per_metre);
+  return sd.array().square().matrix().asDiagonal();
+}
+
+}  // namespace detail
+
+/// The per-keyframe horizontal covariance of `corrector`'s path (see the file comment).
+/// Needs an initialised corrector; fails (ok = false, message) when the graph is rank deficient
+/// (e.g. every anchor on one line: the path may roll about it) or a solve fails.
+inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
+                                                 const PathUncertaintyOptions& options = {}) {
+  PathUncertainty out;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!corrector.initialized()) {
+    out.message = "the correction is not initialised";
+    return out;
+  }
+  const auto& kfs = corrector.keyframes();
+  const auto& corr = corrector.correspondences();
+  const int nk = static_cast<int>(kfs.size());
+  const int na = static_cast<int>(corr.size());
+  const double mpm = corrector.map_per_metre();
+  const DriftModel& model = corrector.options().drift;
+
+  // Measurements and their covariances (fixed over the iterations).
+  std::vector<lie::Sim3d> steps(nk);
+  std::vector<Eigen::Matrix<double, 7, 7>> step_cov(nk);
+  for (int i = 1; i < nk; ++i) {
+    steps[i] = lie::Sim3d(kfs[i].T_cw * kfs[i - 1].T_cw.inverse());
+    step_cov[i] = detail::drift_covariance(model, steps[i], mpm);
+  }
+  std::vector<lie::Sim3d> offsets(na);
+  std::vector<Eigen::Matrix<double, 7, 7>> offset_cov(na);
+  std::vector<double> tag_sd(na);
+  std::vector<int> kf_of(na);
+  for (int j = 0; j < na; ++j) {
+    const auto& c = corr[j];
+    offsets[j] = lie::Sim3d(c.T_vk);
+    offset_cov[j] = detail::drift_covariance(model, offsets[j], mpm);
+    if (c.has_pose_covariance()) {
+      const int at[6] = {0, 1, 2, 4, 5, 6};  // (ω, ν) into (ω, σ, ν)
+      for (int a = 0; a < 6; ++a)
+        for (int b = 0; b < 6; ++b) offset_cov[j](at[a], at[b]) += c.pose_cov(a, b);
+    }
+    tag_sd[j] = c.sigma_m > 0 ? c.sigma_m : corrector.options().ba_geo_sigma_m;
+    kf_of[j] = corrector.keyframe_index(c.keyframe);
+  }
+
+  std::vector<lie::Sim3d> S(nk), V(na);
+  for (int i = 0; i < nk; ++i) S[i] = corrector.keyframe_sim3(i);
+  for (int j = 0; j < na; ++j) V[j] = offsets[j] * S[kf_of[j]];
+
+  // Variance factors: k_d on the drift chain, k_a on each anchor's e2 + e3 (its view's
+  // localization and its geo-tag), both estimated (see the file comment).
+  double k_d = 1.0, k_a = 1.0;
+  solver::Covariance cov;
+  auto info = [](const Eigen::Matrix<double, 7, 7>& C, double k) {
+    const Eigen::Matrix<double, 7, 7> I = (k * C).inverse();
+    return Eigen::Matrix<double, 7, 7>(0.5 * (I + I.transpose()));
+  };
+  for (int it = 0;; ++it) {
+    solver::Problem problem;
+    const solver::RobustLoss trivial;
+    for (int i = 1; i < nk; ++i)
+      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
+                                 info(step_cov[i], k_d), &S[i - 1], &S[i]);
+    for (int j = 0; j < na; ++j) {
+      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}, trivial,
+                                 info(offset_cov[j], k_a), &S[kf_of[j]], &V[j]);
+      problem.add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{corr[j].y_w},
+                                 trivial, 1.0 / (k_a * tag_sd[j] * tag_sd[j]), &V[j]);
+    }
+    solver::Options lm;
+    lm.max_iterations = options.max_iterations;
+    lm.linear_solver = solver::LinearSolverType::kAuto;
+    lm.function_tolerance = 1e-12;
+    lm.num_threads = options.num_threads;
+    const solver::Summary sum = solver::LevenbergMarquardt(lm).solve(&problem);
+    if (!std::isfinite(sum.final_cost)) {
+      out.message = "the uncertainty graph's solve failed (" + sum.message + ")";
+      return out;
+    }
+    std::vector<const void*> wanted;
+    std::vector<solver::Covariance::Pair> pairs;
+    wanted.reserve(nk + na);
+    for (int i = 0; i < nk; ++i) wanted.push_back(&S[i]);
+    for (int j = 0; j < na; ++j) {
+      wanted.push_back(&V[j]);
+      pairs.emplace_back(&S[kf_of[j]], &V[j]);
+    }
+    std::string why;
+    if (!cov.compute(problem, wanted, pairs, &why)) {
+      out.message = "no covariance: " + why;
+      return out;
+    }
+    // The anchors' group: weighted squared residuals and redundancy Σ (dim − tr(W·J·Σ·Jᵀ)).
+    double chi2_a = 0, red_a = 0;
+    for (int j = 0; j < na; ++j) {
+      const lie::Sim3d& Sk = S[kf_of[j]];
+      // e3 = c(V) − y, J = [0 0 −(1/s)·Rᵀ] on ν.
+      const double w3 = 1.0 / (k_a * tag_sd[j] * tag_sd[j]);
+      const Eigen::Vector3d c = V[j].inverse().translation();
+      chi2_a += w3 * (c - corr[j].y_w).squaredNorm();
+      const double s = V[j].scale();
+      red_a += 3.0 - w3 * cov.block(&V[j]).bottomRightCorner<3, 3>().trace() / (s * s);
+      // e2 between S_k and V_j.
+      Eigen::Matrix<double, 7, 1> r2;
+      Eigen::Matrix<double, 7, 7> Ji, Jj;
+      solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}(Sk, V[j], &r2, &Ji, &Jj);
+      const Eigen::Matrix<double, 7, 7> W2 = info(offset_cov[j], k_a);
+      chi2_a += r2.dot(W2 * r2);
+      Eigen::Matrix<double, 7, 14> J;
+      J << Ji, Jj;
+      Eigen::Matrix<double, 14, 14> Sig;
+      Sig.topLeftCorner<7, 7>() = cov.block(&Sk);
+      Sig.bottomRightCorner<7, 7>() = cov.block(&V[j]);
+      Sig.topRightCorner<7, 7>() = cov.block(&Sk, &V[j]);
+      Sig.bottomLeftCorner<7, 7>() = Sig.topRightCorner<7, 7>().transpose();
+      red_a += 7.0 - (W2 * J * Sig * J.transpose()).trace();
+    }
+    const double m = sum.num_residuals;
+    const double n = 7.0 * (nk + na);
+    out.chi2 = 2 * sum.final_cost;
+    out.redundancy = m - n;
+    out.drift_redundancy = out.redundancy - red_a;
+    out.anchor_redundancy = red_a;
+    out.factor_iterations = it;
+    if (!options.estimate_variance_factors) break;
+    // One update per group, each from its own χ² and redundancy; a group with too little
+    // redundancy keeps its factor.
+    const bool est_d = out.drift_redundancy >= options.min_redundancy;
+    const bool est_a = red_a >= options.min_redundancy;
+    const double u_d = est_d ? (out.chi2 - chi2_a) / out.drift_redundancy : 1.0;
+    const double u_a = est_a ? chi2_a / red_a : 1.0;
+    out.message.clear();
+    if (!est_d || !est_a)
+      out.message = std::string("too little redundancy to estimate the ") +
+                    (!est_d && !est_a ? "drift and anchors'"
+                     : !est_d         ? "drift"
+                                      : "anchors'") +
+                    " variance factor (kept at 1)";
+    // Converged when each update is small against the factor's own sampling error (a variance
+    // estimated with redundancy r has relative SD √(2/r)): a quarter of it, at least
+    // factor_tolerance.
+    const auto tol = [&](double r) {
+      return std::max(options.factor_tolerance, 0.25 * std::sqrt(2.0 / std::max(r, 1.0)));
+    };
+    if (std::abs(u_d - 1.0) < tol(out.drift_redundancy) && std::abs(u_a - 1.0) < tol(red_a)) break;
+    if (it + 1 >= options.max_factor_iterations) {
+      out.message += std::string(out.message.empty() ? "" : "; ") +
+                     "variance factors not converged after " + std::to_string(it + 1) +
+                     " iterations (last updates x" + std::to_string(u_d) + ", x" +
+                     std::to_string(u_a) + ")";
+      break;
+    }
+    k_d *= u_d;  // Σ is recomputed with them: the Σ returned is always the one at (k_d, k_a)
+    k_a *= u_a;
+  }
+  out.anchor_factor = k_a;
+  out.drift_factor = k_d;
+  out.cov_en.resize(nk);
+  for (int i = 0; i < nk; ++i) {
+    const Eigen::Matrix3d R = S[i].rotation().matrix();
+    const double s = S[i].scale();
+    const Eigen::Matrix3d Sv = cov.block(&S[i]).bottomRightCorner<3, 3>();
+    const Eigen::Matrix3d Sc = R.transpose() * Sv * R / (s * s);
+    out.cov_en[i] = Sc.topLeftCorner<2, 2>();
+    out.map_estimate_w.push_back(S[i].inverse().translation());
+  }
+  out.ok = true;
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+}
+
+}  // namespace geodrift::correction
