@@ -196,8 +196,11 @@ int run_correct(int argc, char** argv) {
   try {
     opt.mode = correction::mode_from_string(args.get("mode", "ours"));
     format = io::parse_trajectory_format(args.get("format", "auto"));
-    if (correction::paper_weights_from_string(args.get("weights", "paper")))
-      opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kPaper;
+    // Both ways explicitly: the Corrector's default is the paper's, so setting only kPaper
+    // left --weights drift without effect.
+    opt.edge_weights = correction::paper_weights_from_string(args.get("weights", "paper"))
+                           ? correction::CorrectorOptions::EdgeWeights::kPaper
+                           : correction::CorrectorOptions::EdgeWeights::kDriftModel;
   } catch (const InvalidArgument& e) {
     throw UsageError(e.what());
   }

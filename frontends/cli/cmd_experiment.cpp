@@ -192,7 +192,8 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       if (setup.trajectory_only && kMethods[m].mode == correction::Mode::kInitBa) continue;
       correction::CorrectorOptions opt;
       opt.mode = kMethods[m].mode;
-      if (setup.paper) opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kPaper;
+      opt.edge_weights = setup.paper ? correction::CorrectorOptions::EdgeWeights::kPaper
+                                     : correction::CorrectorOptions::EdgeWeights::kDriftModel;
       opt.gate_anchors = setup.gate;
       Cell& cell = local[{m, static_cast<int>(ii)}];
       auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run) {

@@ -306,6 +306,19 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
           std::string::npos);
   }
 
+  // --weights drift reaches the Corrector (it once had no effect: the Corrector's default is
+  // the paper's and only kPaper was ever set), and report.json says which weights were used.
+  {
+    const double drift = correct_eval("drift", map + " --weights drift");
+    const std::string rep_d = geodrift::test::read_text(t.file("drift/report.json"));
+    const std::string rep_p = geodrift::test::read_text(t.file("ours/report.json"));
+    CHECK(rep_d.find("\"edge_weights\": \"drift\"") != std::string::npos);
+    CHECK(rep_p.find("\"edge_weights\": \"paper\"") != std::string::npos);
+    CHECK(geodrift::test::read_text(t.file("drift/trajectory_kitti.txt")) !=
+          geodrift::test::read_text(t.file("ours/trajectory_kitti.txt")));
+    CHECK(drift < init);
+  }
+
   // The three options reach the Corrector and report.json records them.
   {
     const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));

@@ -13,6 +13,7 @@
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
+#include "support/kitti.hpp"
 
 using namespace geodrift;
 
@@ -126,13 +127,7 @@ ModelRun model_run(unsigned seed, double k_true, int n = 300) {
   std::normal_distribution<double> N01(0.0, 1.0);
   const correction::DriftModel model;
   ModelRun r;
-  map::Camera cam;
-  cam.fx = cam.fy = 700;
-  cam.cx = 620;
-  cam.cy = 188;
-  cam.width = 1241;
-  cam.height = 376;
-  r.m.cameras.push_back(cam);
+  r.m.cameras.push_back(test::kitti_camera());
   std::vector<lie::SE3d> T_wc(n);
   double psi = 0;
   Eigen::Vector3d p(0, 0, 0);
