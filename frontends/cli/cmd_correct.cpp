@@ -396,6 +396,12 @@ int run_correct(int argc, char** argv) {
                 " after INIT were rejected as inconsistent with the path INIT's anchors give "
                 "(wrong INIT anchors, a broken trajectory, or anchors of another place): no "
                 "trustworthy result, nothing written");
+  if (corrector.rejected_window_updates() > 0)
+    std::fprintf(stderr,
+                 "geodrift correct: warning: %d pose-graph window(s) diverged and were not "
+                 "applied (a keyframe rescaled by more than %gx; report.json steps say which): "
+                 "check the anchors near them\n",
+                 corrector.rejected_window_updates(), opt.max_window_rescale);
   // ---- uncertainty of the corrected path (correction/uncertainty.hpp) ---------------------
   correction::PathUncertainty unc;
   if (!args.flag("no-uncertainty")) {
@@ -557,7 +563,8 @@ int run_correct(int argc, char** argv) {
       << ", \"rms_m\": " << json_num(ir.rms_m) << ", \"inliers\": " << ir.inliers.size()
       << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
       << ",\n  \"anchor_residuals_m\": " << residuals
-      << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor());
+      << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor())
+      << ",\n  \"rejected_window_updates\": " << corrector.rejected_window_updates();
     {
       std::vector<double> sd;
       for (const auto& C : unc.cov_en) sd.push_back(std::sqrt(C.trace()));

@@ -113,6 +113,11 @@ struct CorrectorOptions {
   /// is tied to that one. With the first window from keyframe 0 the residuals are 1 cm and the
   /// final mean 2D error of Ours drops from 7.2 to 4.7 m (INIT+PGO: 4.9 to 4.3 m).
   bool first_window_from_start = true;
+  /// A PGO window whose solution rescales any keyframe by more than this factor is not applied
+  /// (a diverged solve: a monocular VO's scale drifts by tens of per cent between anchors).
+  /// Seen with --weights drift on simulated 08, trajectory only, seed 5, interval 300, where
+  /// the path otherwise ended at a mean 2D error of 4.8e14 m.
+  double max_window_rescale = 10.0;
   /// How the PGO edges are weighted.
   ///  - kDriftModel: every edge carries the uncertainty of what it measures, in
   ///    physical units (correction/drift_model.hpp, docs/correction_model.md): e1 the VO's
@@ -121,9 +126,9 @@ struct CorrectorOptions {
   ///    σ (Correspondence::sigma_m, ba_geo_sigma_m when unset). The corrected path does not
   ///    depend on the map's unit or frame. lambda1..3 are not used. Not the default yet:
   ///    measured on the simulator (docs/RESULTS.md, "Drift-model weights") it is better at
-  ///    anchor intervals of 100-200 frames and worse at 300-500 on 08, and LM from INIT's
-  ///    state does not always converge with it (full batch on 02 seed 2: 50 iterations at cost
-  ///    8.9e5, 61 m; sliding windows on 08 at 400, one seed of five diverges).
+  ///    anchor intervals of 100-200 frames and worse at 300-500 on 08. Its PGO windows run
+  ///    with geodesic acceleration and backtracking (run_pgo), without which LM from INIT's
+  ///    state stopped at the iteration limit far from the optimum on some seeds.
   ///  - kPaper (default): the paper's λ1 = λ2 = 1e5 on all seven components of e1/e2 in MAP units
   ///  and
   ///    λ3 = 1 on e3 in metres. A map unit of translation then weighs as much as a radian and a
@@ -282,6 +287,8 @@ struct CorrectorOptions {
       if (!(std::isfinite(l) && l > 0)) return fail("PGO weights lambda1..3 must be finite, > 0");
     if (min_shared_points < 1) return fail("min_shared_points must be >= 1");
     if (consecutive_links < 1) return fail("consecutive_links must be >= 1");
+    if (!(max_window_rescale > 1) || std::isnan(max_window_rescale))
+      return fail("max_window_rescale must be > 1");
     if (!(ba_huber_px > 0 && std::isfinite(ba_huber_px)))
       return fail("ba_huber_px must be finite and > 0");
     if (!std::isfinite(ba_first_pass_huber_px))
@@ -502,6 +509,9 @@ class Corrector {
   const std::vector<AnchorDecision>& anchor_decisions() const { return decisions_; }
   /// The data's drift level relative to DriftModel (k of CorrectorOptions::gate_anchors).
   double drift_factor() const { return drift_factor_; }
+  /// PGO window updates that were not applied because they rescaled a keyframe by more than
+  /// CorrectorOptions::max_window_rescale.
+  int rejected_window_updates() const { return rejected_updates_; }
   /// Where the current path puts received correspondence d's view centre in W (after INIT).
   Eigen::Vector3d received_view_center_w(int d) const {
     require_init();
@@ -1024,11 +1034,34 @@ class Corrector {
     lm.linear_solver = solver::LinearSolverType::kAuto;
     lm.function_tolerance = 1e-10;
     lm.num_threads = options_.num_threads;
+    if (!paper) {
+      // Drift weights span rotation, scale and metre-level translation informations over
+      // orders of magnitude, and a window starts far from its optimum when the new anchor is
+      // metres off the extrapolated path: the solver's setting for such Sim(3) chains
+      // (solver::Options, docs/library.md). Without it, simulated 08 (trajectory only, seed 5,
+      // interval 300) stopped a window at 50 iterations 1000x above its noise-level cost and
+      // every later window diverged.
+      lm.geodesic_acceleration = true;
+      lm.backtracking = true;
+      lm.initial_lambda = 1e-8;
+    }
     const solver::Summary sum = solver::LevenbergMarquardt(lm).solve(&problem);
     rep.nodes = nw + nv;
     rep.edges = edges;
     fill(&rep, sum);
-    if (usable(sum)) apply_window_update(lo, hi, S);
+    // A window update that rescales a keyframe by more than max_window_rescale is a diverged
+    // solve, not a correction (a monocular VO's scale drifts by tens of per cent between
+    // anchors, docs/correction_model.md): the window keeps its state, and the report says so.
+    double rescale = 1.0;
+    for (int i = lo; i <= hi; ++i)
+      rescale = std::max(rescale, std::exp(std::abs(std::log(S[i - lo].scale() / S_[i].scale()))));
+    if (usable(sum) && rescale <= options_.max_window_rescale) {
+      apply_window_update(lo, hi, S);
+    } else if (usable(sum)) {
+      rep.termination +=
+          " (update rejected: a keyframe rescaled by " + std::to_string(rescale) + "x)";
+      ++rejected_updates_;
+    }
     rep.seconds = seconds_since(t0);
     rep.cpu_seconds = cpu_seconds_since(c0);
     reports_.push_back(rep);
@@ -1273,6 +1306,7 @@ class Corrector {
   std::vector<AnchorDecision> decisions_;            ///< what was done with received_[d]
   std::vector<std::pair<double, double>> gate_var_;  ///< (fixed, drift) variance of received_[d]
   double drift_factor_ = 1.0;
+  int rejected_updates_ = 0;  ///< PGO window updates not applied (max_window_rescale)
   bool initialized_ = false;
   int first_window_ = -1;  ///< `first` of the first window after INIT (its correspondences)
   InitResult init_;
