@@ -1,5 +1,19 @@
 #pragma once
 
+/// @file
+/// Corrector: the paper's scale-drift correction as a stream (DESIGN.md "Correction"). A SLAM
+/// front end (or correction::replay() over a finished map) hands it cameras, keyframes, map
+/// points, observations and geo-referenced correspondences as they appear; INIT fits a
+/// similarity M → W to the first anchors, and every later correspondence runs a sliding-window
+/// Sim(3) pose graph (+ BA with a map) per CorrectorOptions::mode.
+///
+/// Conventions: keyframe poses T_cw in the map frame M (world → camera, the map's arbitrary
+/// unit); corrected poses S_cw ∈ Sim(3) from W (UTM grid shifted, x east, y north, z up,
+/// metres) to the camera in M units; tangent (ω, σ, ν), perturbations on the LEFT; geo-tags
+/// y_w in W with σ in metres. Edge weights: the paper's λ (default) or the drift model
+/// (correction/drift_model.hpp, unit-invariant). Uncertainty of the result:
+/// correction/uncertainty.hpp.
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <chrono>
