@@ -18,15 +18,16 @@
 ///     where it has one) and a camera-centre prior at the geo-tag with σ = sigma_m.
 /// Σ = H⁻¹ from solver::Covariance at the optimum, Σ_c = (1/s²)·Rᵀ·Σ_νν·R per keyframe.
 ///
-/// ## The drift level
-/// A VO's drift differs from the model's nominal numbers by a factor (camera, texture, speed).
-/// That factor k (a variance factor on every drift-model edge; the geo-tags' σ are taken as
-/// given) is estimated from the data by variance-component estimation (Helmert; Förstner 1979,
-/// "Ein Verfahren zur Schätzung von Varianz- und Kovarianzkomponenten"): the group of drift
-/// edges must explain its own weighted squared residuals with its own redundancy,
-///     k ← k · χ²_D / r_D,   r_D = (m − n) − r_A,   r_A = Σ_anchors (3 − tr(W_j·J_j·Σ_j·J_jᵀ)),
-/// iterated to a fixed point (m residuals, n free tangent columns). With fewer redundant
-/// anchor components than `min_redundancy` the nominal model (k = 1) is kept and said so.
+/// ## The drift level and the anchors' quality
+/// A VO's drift differs from the model's nominal numbers by a factor (camera, texture, speed),
+/// and anchors are often worse than their stated σ. Two variance factors, k_d on every chain
+/// edge and k_a on each anchor's e2 + e3, are estimated from the data by variance-component
+/// estimation (Helmert; Förstner 1979, "Ein Verfahren zur Schätzung von Varianz- und
+/// Kovarianzkomponenten"): each group must explain its own weighted squared residuals with its
+/// own redundancy,
+///     k_g ← k_g · χ²_g / r_g,   r_A = Σ_anchor rows (1 − (W·J·Σ·Jᵀ)_rr),   r_D = (m − n) − r_A,
+/// iterated to a fixed point (m residuals, n free tangent columns). A group with redundancy
+/// below `min_redundancy` keeps its factor at 1, and the message says so.
 /// Nothing here changes the corrected path.
 
 #include <Eigen/Core>
@@ -69,7 +70,6 @@ struct PathUncertainty {
   double drift_factor = 1.0;
   double redundancy = 0;  ///< m − n of the uncertainty graph
   double drift_redundancy = 0;
-  double rotation_factor = 1.0, translation_factor = 1.0;
   double anchor_factor = 1.0;  ///< the anchors' variance relative to their stated σ and PnP
   double anchor_redundancy = 0;
   double chi2 = 0;  ///< 2·cost at the optimum (with k applied)
