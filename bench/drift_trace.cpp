@@ -1,7 +1,8 @@
 // drift_trace: one accelerated LM solve of bench_solver's Sim(3) drift graph in a fresh process,
 // with its per-iteration trace (cost, accepted, λ, wall and CPU seconds since solve() started).
 // Where bench_solver's rows follow each other in one process (and reuse or inherit each other's
-// memory), this is the solve a user runs once: the fresh-process A/B of BENCHMARKS.md round 7.
+// memory), this is the solve a user runs once: the fresh-process A/B of round 7 of
+// BENCHMARKS.md's history (`git show 3d5878d:BENCHMARKS.md`).
 //
 // usage: drift_trace [keyframes = 10000] [lambda0 = 1e-8] [seed = 7, the benchmark's]
 //   GEODRIFT_HUGE_PAGES=1 puts the solver's large arrays on huge pages (large_array_allocator.hpp).

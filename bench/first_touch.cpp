@@ -1,8 +1,9 @@
 // first_touch: what first touching fresh anonymous memory costs on this machine, with 4 KiB
 // pages and with transparent huge pages (MADV_HUGEPAGE), in ms per MB. A diagnostic for the
-// page-size choice of solver/large_array_allocator.hpp (BENCHMARKS.md round 7), not a Google
-// Benchmark: the interesting number is the first touch after the memory went back to the host,
-// which repetitions inside one process do not see (their second pass reuses backed pages).
+// page-size choice of solver/large_array_allocator.hpp (round 7 of BENCHMARKS.md's history,
+// `git show 3d5878d:BENCHMARKS.md`), not a Google Benchmark: the interesting number is the
+// first touch after the memory went back to the host, which repetitions inside one process do
+// not see (their second pass reuses backed pages).
 //
 // usage: first_touch [MB = 256] [passes = 3]
 //   each pass maps MB, touches one byte per 4 KiB, unmaps; per page size, huge pages first.

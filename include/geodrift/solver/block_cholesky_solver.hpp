@@ -32,7 +32,8 @@
 ///    instead of a matrix of its own: block column i of H's upper storage becomes block row i
 ///    of L, computed row by row (up-looking; BlockFactor::factorize_in_place_with). No memory for
 ///    L (137 MB at 50k Sim(3) keyframes, whose first touch cost more than the factorisation on
-///    the project's VMs: BENCHMARKS.md round 14) and no copy of H into it.
+///    the project's VMs: round 14 of BENCHMARKS.md's history, `git show 3d5878d:BENCHMARKS.md`)
+///    and no copy of H into it.
 
 #include <Eigen/Core>
 #include <Eigen/OrderingMethods>
@@ -485,7 +486,8 @@ class BlockFactor final : public BlockFactorBase {
 
   const BlockSymbolic* sym_ = nullptr;
   // Ordinary allocation: on the solver's own large-array mappings (huge pages or not) this
-  // factorisation ran 25-30 % slower in the 10k drift solve (BENCHMARKS.md, round 6).
+  // factorisation ran 25-30 % slower in the 10k drift solve (BENCHMARKS.md "Tried and not
+  // kept"; round 6 of its history, `git show 3d5878d:BENCHMARKS.md`).
   std::vector<Mat, Eigen::aligned_allocator<Mat>> L_, Linv_;
   std::vector<Vec, Eigen::aligned_allocator<Vec>> y_;
   std::vector<int> slot_of_row_, head_, next_, ptr_;

@@ -3,11 +3,12 @@
 /// @file
 /// LargeArrayAllocator: the allocator of the solver's big per-problem arrays (the values of H
 /// and of its speculative twin, the geodesic-acceleration store; not the block Cholesky factor,
-/// whose factorisation ran 25-30 % slower on these mappings, BENCHMARKS.md round 6).
+/// whose factorisation ran 25-30 % slower on these mappings: BENCHMARKS.md "Tried and not
+/// kept"). Rounds N below are those of BENCHMARKS.md's history, `git show 3d5878d:BENCHMARKS.md`.
 ///
 /// Why: a solve first-touches all of these, and on a virtual machine a first touch can cost far
 /// more than the arithmetic that follows. How much, and which page size is cheaper, depends on
-/// the host (BENCHMARKS.md, rounds 6 and 7), so:
+/// the host (rounds 6 and 7), so:
 /// - Page size: a choice, off by default. With set_large_array_huge_pages(true) (or the
 ///   environment variable GEODRIFT_HUGE_PAGES=1, read once) new mappings are marked
 ///   MADV_HUGEPAGE, which the kernel backs with transparent huge pages (THP "madvise" mode,

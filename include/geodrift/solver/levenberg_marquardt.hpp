@@ -115,7 +115,8 @@ struct Options {
   /// trials after a rejection are evaluated cost-only. Same steps either way. (On the 50k drift
   /// graph, whose first trial at λ0 = 1e-8 is rejected, a cost-only first trial took the time to
   /// reach Ceres' cost from 6.81 to 6.44 s CPU, medians of 6; on the 10k graph, whose first trial
-  /// is accepted, no change beyond noise: BENCHMARKS.md round 8.)
+  /// is accepted, no change beyond noise: round 8 of BENCHMARKS.md's history,
+  /// `git show 3d5878d:BENCHMARKS.md`.)
   bool speculative_linearization = true;
   /// Geodesic acceleration (M. K. Transtrum, J. P. Sethna, "Improvements to the
   /// Levenberg-Marquardt algorithm for nonlinear least-squares minimization", arXiv:1201.5885,

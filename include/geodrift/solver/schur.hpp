@@ -27,8 +27,9 @@
 /// of the full-H solvers), otherwise CHOLMOD (the general path: wide cameras with
 /// intrinsics, large dense reduced systems where BLAS-3 supernodes win). The Corrector's
 /// sliding-window BA (≈ 30 cameras, S nearly dense: ≤ 16 blocks per column), KITTI 00 (77
-/// cameras) and the synthetic 500-camera benchmark all take the block Cholesky; see
-/// BENCHMARKS.md "Round 3" for the measurements.
+/// cameras) and the synthetic 500-camera benchmark all take the block Cholesky; the
+/// measurements are round 3 of BENCHMARKS.md's history (`git show 3d5878d:BENCHMARKS.md`),
+/// today's BA numbers BENCHMARKS.md "Bundle adjustment".
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
