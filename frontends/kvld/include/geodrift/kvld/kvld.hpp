@@ -64,8 +64,8 @@ struct ScaleLevel {
 ///
 /// Built once per image and reused for any number of pairs (it is immutable, so it may be
 /// shared between threads). Memory: 3 floats per pixel per level, levels shrinking by 2 in
-/// area: about 24·W·H bytes (11 MB for 1241×376). Building it costs about one ORB
-/// detect+compute of the same image (BENCHMARKS.md, "kVLD").
+/// area: about 24·W·H bytes (11 MB for 1241×376). Building it costs about 2.7 ORB
+/// detect+compute of the same image (30 ms against 11 ms CPU: BENCHMARKS.md "K-VLD").
 ///
 /// Intensities are used as given; the reference code and the `max_contrast` gate (300) assume
 /// a 0–255 scale, which is what an 8-bit image gives.
