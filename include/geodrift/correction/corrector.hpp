@@ -460,6 +460,15 @@ class Corrector {
     AnchorDecision dec;
     dec.id = c.id;
     dec.keyframe = c.keyframe;
+    if (const auto ex = excluded_.find(c.id); ex != excluded_.end()) {
+      dec.why = ex->second.why;
+      dec.innovation_m = ex->second.innovation_m;
+      dec.gate_m = ex->second.gate_m;
+      received_.push_back(c);
+      decisions_.push_back(dec);
+      gate_var_.push_back({0.0, 0.0});
+      return;
+    }
     for (const auto& d : corr_)
       if (d.keyframe == c.keyframe && (d.y_w - c.y_w).norm() < 1e-3) {
         dec.why = "duplicate of correspondence " + std::to_string(d.id) +
@@ -515,6 +524,15 @@ class Corrector {
     decisions_.push_back(dec);
     gate_var_.push_back(var);
     use(static_cast<int>(decisions_.size()) - 1);
+  }
+
+  /// Leaves correspondence `id` out when it arrives: a decision made before the stream with
+  /// every anchor known (correction/screening.hpp). Its AnchorDecision gets `why` and the
+  /// innovation and gate (metres) the decision was made on.
+  void exclude_correspondence(int id, const std::string& why,
+                              double innovation_m = std::numeric_limits<double>::quiet_NaN(),
+                              double gate_m = std::numeric_limits<double>::quiet_NaN()) {
+    excluded_[id] = AnchorDecision{id, -1, false, why, innovation_m, gate_m, false};
   }
 
   /// Every correspondence received (duplicates aside), in arrival order, and what was done
@@ -1313,12 +1331,13 @@ class Corrector {
   std::vector<Eigen::Vector3d> X_w_;                         ///< corrected points (after INIT)
   std::vector<std::vector<std::pair<int, int>>> observers_;  ///< point -> (kf index, obs index)
   std::vector<map::Observation> obs_;
-  std::map<std::pair<int, int>, int> shared_;        ///< (kf index a < b) -> shared points
-  std::vector<map::Correspondence> corr_;            ///< in use, in the order they were taken in
-  std::vector<int> corr_dec_;                        ///< decision (received_ index) of corr_[j]
-  std::vector<map::Correspondence> received_;        ///< every one received (duplicates aside)
-  std::vector<AnchorDecision> decisions_;            ///< what was done with received_[d]
-  std::vector<std::pair<double, double>> gate_var_;  ///< (fixed, drift) variance of received_[d]
+  std::map<std::pair<int, int>, int> shared_;         ///< (kf index a < b) -> shared points
+  std::vector<map::Correspondence> corr_;             ///< in use, in the order they were taken in
+  std::vector<int> corr_dec_;                         ///< decision (received_ index) of corr_[j]
+  std::vector<map::Correspondence> received_;         ///< every one received (duplicates aside)
+  std::vector<AnchorDecision> decisions_;             ///< what was done with received_[d]
+  std::unordered_map<int, AnchorDecision> excluded_;  ///< exclude_correspondence()
+  std::vector<std::pair<double, double>> gate_var_;   ///< (fixed, drift) variance of received_[d]
   double drift_factor_ = 1.0;
   int rejected_updates_ = 0;  ///< PGO window updates not applied (max_window_rescale)
   bool initialized_ = false;

@@ -1,0 +1,497 @@
+#pragma once
+
+/// @file
+/// Wrong anchors found before the correction uses them (issue 24 item 3): a geo-tag that is
+/// tens or hundreds of metres off (a retrieval mistake, a mis-tagged panorama, a GNSS multipath
+/// fix) disagrees with the anchors before AND after it along the path, by more than the VO can
+/// have drifted between them. When every anchor is known up front (`geodrift correct`, the
+/// experiment) each one can be tested against all the others, which a causal test against
+/// the path so far (CorrectorOptions::gate_anchors) cannot: its prediction is an extrapolation,
+/// this one an interpolation.
+///
+/// ## Model
+/// The drift model's graph of uncertainty.hpp, over the raw path: a Sim(3) chain of the VO's
+/// steps between consecutive keyframes (information from DriftModel over each step's length
+/// and turn: the VO's errors add in variance along the path), per anchor a view node joined to
+/// its keyframe by the fixed offset T_vk (drift over the offset plus the view's PnP covariance
+/// where it has one) and, for an anchor in use, a camera-centre prior at its geo-tag with
+/// σ = sigma_m. Solved by LM from INIT's global similarity (RANSAC over all anchors). All
+/// information is physical (metres, radians), so the outcome does not depend on the map's unit.
+///
+/// ## The test (Baarda's data snooping)
+/// At the optimum, for anchor j with residual r = y − ĉ (ĉ its view's centre, C its marginal
+/// covariance, R = σ²I its geo-tag's):
+///   - in use: the others predict its centre with covariance P = (C⁻¹ − R⁻¹)⁻¹, and the
+///     leave-one-out innovation is e = (I + P·R⁻¹)·r (the linear-Gaussian identity
+///     r = R·(P + R)⁻¹·e);
+///   - left out: its view node has no prior, so P = C and e = r.
+/// The statistic is horizontal, T = e_hᵀ·(P + R)_hh⁻¹·e_h ~ χ²₂ for a correct anchor.
+/// Rounds, each a solve with the anchors in use and their statistics:
+///   1. At the model's nominal drift (k = 1) the anchors with T > χ²₂(probability) that are
+///      the worst among their in-use neighbours are left out (one wrong anchor also bends the
+///      path near its neighbours and raises their T: removing only local maxima keeps those),
+///      until none is.
+///   2. The drift level of the data is not the model's (camera, texture, speed): the chain's
+///      covariance is scaled by a factor k, the one at which the median of T over the anchors
+///      in use is χ²₂'s median (2 ln 2); the median ignores wrong anchors while they are fewer
+///      than half. Re-solved while k moves by more than 5 %, anchors above the threshold still
+///      leaving.
+///   3. A left-out anchor with T ≤ χ²₂(readmit_probability) returns; so do two consecutive
+///      left-out anchors that agree with each other (their displacement matches the path's
+///      between them: it was the path, bent in a turn, that disagreed with the rest; two wrong
+///      geo-tags are off independently). An anchor goes out or back in at most max_flips times.
+/// The probability is 0.99999 (threshold 23.0), not 0.999: the simulated and real drift is
+/// heavier-tailed than the Gaussian model in turns, and at 0.999 a clean run lost 2-4 % of its
+/// correct anchors; at 0.99999 about 0.3 %, while a 20 m shift 100 frames from its neighbours
+/// still stands out. What it cannot do: tell a wrong anchor from a correct one after a turn
+/// the model underrates, when both disagree with the rest alike (docs/correction_model.md
+/// "Wrong anchors": a clean run costs 0-4 % over the sequences, 11 % on a turn-heavy stretch).
+///
+/// Fewer than three anchors, or anchors whose prediction is not determined (all on one point),
+/// cannot be tested: they stay in use, and the result says so.
+
+#include <Eigen/Core>
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "geodrift/correction/corrector.hpp"
+#include "geodrift/correction/drift_model.hpp"
+#include "geodrift/correction/init.hpp"
+#include "geodrift/error.hpp"
+#include "geodrift/lie/sim3.hpp"
+#include "geodrift/map/correspondence.hpp"
+#include "geodrift/map/keyframe.hpp"
+#include "geodrift/solver/covariance.hpp"
+#include "geodrift/solver/levenberg_marquardt.hpp"
+#include "geodrift/solver/problem.hpp"
+#include "geodrift/solver/residuals/relative_pose.hpp"
+
+namespace geodrift::correction {
+
+struct AnchorScreeningOptions {
+  DriftModel drift;
+  /// χ²₂ quantile above which an anchor is left out (−2·ln(1 − p) = 13.8 at 0.999: a correct
+  /// anchor is lost once in a thousand).
+  double probability = 0.99999;
+  /// χ²₂ quantile below which a left-out anchor returns (lower than `probability`, so an anchor
+  /// near the threshold does not go in and out).
+  double readmit_probability = 0.99999;
+  /// σ of anchors whose sigma_m is not > 0 (metres).
+  double default_sigma_m = 1.0;
+  /// RANSAC threshold of the starting similarity, as a fraction of the anchors' horizontal
+  /// extent (at least min_start_threshold_m): the start only has to be near the optimum, and a
+  /// drifting path misses a global similarity by a few percent of its length.
+  double start_threshold_fraction = 0.03;
+  double start_threshold_m = 10.0;
+  double min_factor = 1e-2, max_factor = 1e4;  ///< bounds of the drift factor k
+  /// Times an anchor may go out or back in (the rounds then end).
+  int max_flips = 4;
+  int max_rounds = 60;
+  int max_iterations = 100;  ///< LM iterations per solve
+  int num_threads = 1;
+
+  bool validate(std::string* why) const {
+    auto fail = [&](const std::string& m) {
+      if (why) *why = "anchor screening: " + m;
+      return false;
+    };
+    if (!drift.validate(why)) return false;
+    if (!(probability > 0 && probability < 1)) return fail("probability must be in (0, 1)");
+    if (!(readmit_probability > 0 && readmit_probability <= probability))
+      return fail("readmit_probability must be in (0, probability]");
+    if (!(default_sigma_m > 0 && std::isfinite(default_sigma_m)))
+      return fail("default_sigma_m must be finite and > 0");
+    if (!(start_threshold_fraction >= 0 && start_threshold_m > 0))
+      return fail("start thresholds must be >= 0 and > 0");
+    if (!(min_factor > 0 && max_factor >= min_factor && std::isfinite(max_factor)))
+      return fail("factors must satisfy 0 < min_factor <= max_factor < inf");
+    if (max_rounds < 1 || max_iterations < 1) return fail("max_rounds, max_iterations >= 1");
+    return true;
+  }
+};
+
+/// The outcome for one anchor.
+struct ScreenedAnchor {
+  bool used = true;
+  bool testable = false;  ///< false: its prediction from the others is not determined
+  std::string why;        ///< why it is left out ("" when used)
+  /// Horizontal leave-one-out innovation: its geo-tag minus where the other anchors and the
+  /// path put its view (metres), that prediction's SD with the geo-tag's (√(trace/2), metres),
+  /// and the statistic T (χ²₂ for a correct anchor).
+  double innovation_m = std::numeric_limits<double>::quiet_NaN();
+  double sd_m = std::numeric_limits<double>::quiet_NaN();
+  double statistic = std::numeric_limits<double>::quiet_NaN();
+  int readmissions = 0;
+};
+
+struct AnchorScreening {
+  bool ok = false;      ///< false: nothing could be tested (message says why); all stay in use
+  std::string message;  ///< why not ok, or a note
+  std::vector<ScreenedAnchor> anchors;  ///< one per input correspondence, same order
+  double drift_factor = 1.0;            ///< k: the data's drift variance relative to the model
+  double threshold = 0;                 ///< χ²₂(probability)
+  int rounds = 0;
+  double seconds = 0;
+
+  int num_left_out() const {
+    int n = 0;
+    for (const auto& a : anchors) n += !a.used;
+    return n;
+  }
+};
+
+namespace detail {
+
+/// χ²₂ quantile: −2·ln(1 − p).
+inline double chi2_2_quantile(double p) { return -2.0 * std::log1p(-p); }
+
+}  // namespace detail
+
+/// Tests every anchor against all the others along the raw path `keyframes` (time order, T_cw
+/// in M) and leaves out the inconsistent ones (see the file comment).
+/// @throws InvalidArgument on an unknown keyframe id, non-finite input or invalid options.
+inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframes,
+                                      const std::vector<map::Correspondence>& anchors,
+                                      const AnchorScreeningOptions& options = {}) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string why;
+  GEODRIFT_CHECK(options.validate(&why), why);
+  AnchorScreening out;
+  const int nk = static_cast<int>(keyframes.size());
+  const int na = static_cast<int>(anchors.size());
+  out.anchors.resize(na);
+  out.threshold = detail::chi2_2_quantile(options.probability);
+  auto done = [&](bool ok, const std::string& msg) {
+    out.ok = ok;
+    out.message = msg;
+    out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return out;
+  };
+  std::unordered_map<int, int> kf_index;
+  for (int i = 0; i < nk; ++i) {
+    GEODRIFT_CHECK(keyframes[i].T_cw.matrix().allFinite(),
+                   "anchor screening: keyframe " << keyframes[i].id << " pose is not finite");
+    kf_index[keyframes[i].id] = i;
+  }
+  std::vector<int> kf_of(na);
+  for (int j = 0; j < na; ++j) {
+    const auto& c = anchors[j];
+    const auto it = kf_index.find(c.keyframe);
+    GEODRIFT_CHECK(it != kf_index.end(),
+                   "correspondence " << c.id << " names unknown keyframe " << c.keyframe);
+    GEODRIFT_CHECK(c.y_w.allFinite() && c.T_vk.matrix().allFinite() && c.pose_cov.allFinite(),
+                   "correspondence " << c.id << " is not finite");
+    kf_of[j] = it->second;
+  }
+  if (na < 3) return done(false, "fewer than 3 anchors: none can be tested against the others");
+
+  // ---- start: INIT's similarity over all anchors (RANSAC) ------------------------------------
+  std::vector<Eigen::Vector3d> centres, ups, am, aw;
+  for (const auto& k : keyframes) {
+    const lie::SE3d T_wc = k.T_cw.inverse();
+    centres.push_back(T_wc.translation());
+    ups.push_back(-(T_wc.rotation().matrix().col(1)));  // camera y is down
+  }
+  Eigen::Vector2d lo = anchors[0].y_w.head<2>(), hi = lo;
+  for (int j = 0; j < na; ++j) {
+    am.push_back((anchors[j].T_vk * keyframes[kf_of[j]].T_cw).inverse().translation());
+    aw.push_back(anchors[j].y_w);
+    lo = lo.cwiseMin(anchors[j].y_w.head<2>());
+    hi = hi.cwiseMax(anchors[j].y_w.head<2>());
+  }
+  InitOptions io;
+  io.num_correspondences = 2;
+  io.ransac_threshold_m =
+      std::max(options.start_threshold_m, options.start_threshold_fraction * (hi - lo).norm());
+  const InitResult init = estimate_init(centres, ups, am, aw, io);
+  if (!init.ok) return done(false, "no starting similarity: " + init.message);
+  const double mpm = 1.0 / init.S_wm.scale();  // map units per metre
+
+  // ---- the graph's fixed parts ---------------------------------------------------------------
+  auto covariance = [&](const lie::Sim3d& dS) {
+    const Eigen::Matrix<double, 7, 1> sd =
+        options.drift.sd(dS.translation().norm(), dS.rotation().log().norm(), mpm);
+    return Eigen::Matrix<double, 7, 7>(sd.array().square().matrix().asDiagonal());
+  };
+  std::vector<lie::Sim3d> steps(nk);
+  std::vector<Eigen::Matrix<double, 7, 7>> step_cov(nk);
+  for (int i = 1; i < nk; ++i) {
+    steps[i] = lie::Sim3d(keyframes[i].T_cw * keyframes[i - 1].T_cw.inverse());
+    step_cov[i] = covariance(steps[i]);
+  }
+  std::vector<lie::Sim3d> offsets(na);
+  std::vector<Eigen::Matrix<double, 7, 7>> offset_cov(na);
+  std::vector<double> sigma(na);
+  for (int j = 0; j < na; ++j) {
+    const auto& c = anchors[j];
+    offsets[j] = lie::Sim3d(c.T_vk);
+    offset_cov[j] = covariance(offsets[j]);
+    if (c.has_pose_covariance()) {
+      const int at[6] = {0, 1, 2, 4, 5, 6};  // (ω, ν) into (ω, σ, ν)
+      for (int a = 0; a < 6; ++a)
+        for (int b = 0; b < 6; ++b) offset_cov[j](at[a], at[b]) += c.pose_cov(a, b);
+    }
+    sigma[j] = c.sigma_m > 0 ? c.sigma_m : options.default_sigma_m;
+  }
+  std::vector<lie::Sim3d> S(nk), V(na);
+  const lie::Sim3d S_mw = init.S_wm.inverse();
+  for (int i = 0; i < nk; ++i) S[i] = lie::Sim3d(keyframes[i].T_cw) * S_mw;
+  for (int j = 0; j < na; ++j) V[j] = offsets[j] * S[kf_of[j]];
+
+  auto info = [](const Eigen::Matrix<double, 7, 7>& C, double k) {
+    const Eigen::Matrix<double, 7, 7> I = (k * C).inverse();
+    return Eigen::Matrix<double, 7, 7>(0.5 * (I + I.transpose()));
+  };
+  // Anchors in keyframe order (for "neighbours").
+  std::vector<int> order(na);
+  for (int j = 0; j < na; ++j) order[j] = j;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return kf_of[a] < kf_of[b]; });
+
+  double k = 1.0;
+  bool estimate_k = false;
+  std::vector<int> flips(na, 0);  // times each anchor went out or back in
+  const double readmit = detail::chi2_2_quantile(options.readmit_probability);
+  std::vector<Eigen::Vector2d> e(na);
+  std::vector<Eigen::Matrix2d> Ph(na), Rh(na);  // prediction (at k) and geo-tag covariances
+  // The graph with priors on the anchors `use`, solved from S, V at the drift factor k.
+  auto solve = [&](const std::vector<char>& use, solver::Problem* problem) {
+    const solver::RobustLoss trivial;
+    for (int i = 1; i < nk; ++i)
+      problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
+                                  info(step_cov[i], k), &S[i - 1], &S[i]);
+    for (int j = 0; j < na; ++j) {
+      problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}, trivial,
+                                  info(offset_cov[j], k), &S[kf_of[j]], &V[j]);
+      if (use[j])
+        problem->add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{anchors[j].y_w},
+                                    trivial, 1.0 / (sigma[j] * sigma[j]), &V[j]);
+    }
+    solver::Options lm;
+    lm.max_iterations = options.max_iterations;
+    lm.linear_solver = solver::LinearSolverType::kAuto;
+    lm.function_tolerance = 1e-10;
+    // A long Sim(3) chain from a global similarity: the solver's setting for it (as the
+    // Corrector's drift-weighted windows).
+    lm.geodesic_acceleration = true;
+    lm.backtracking = true;
+    lm.initial_lambda = 1e-8;
+    lm.num_threads = options.num_threads;
+    return solver::LevenbergMarquardt(lm).solve(problem);
+  };
+  auto used_mask = [&]() {
+    std::vector<char> use(na);
+    for (int j = 0; j < na; ++j) use[j] = out.anchors[j].used;
+    return use;
+  };
+  for (int round = 0;; ++round) {
+    if (round >= options.max_rounds) {
+      out.message = "stopped after " + std::to_string(options.max_rounds) + " rounds";
+      break;
+    }
+    out.rounds = round + 1;
+    // Solve with the anchors in use.
+    solver::Problem problem;
+    const std::vector<char> use = used_mask();
+    int in_use = 0;
+    for (char u : use) in_use += u;
+    const solver::Summary sum = solve(use, &problem);
+    if (!std::isfinite(sum.final_cost))
+      return done(false, "the screening graph's solve failed (" + sum.message + ")");
+    std::vector<const void*> wanted;
+    for (int j = 0; j < na; ++j) wanted.push_back(&V[j]);
+    // Cross-covariances of consecutive left-out anchors (their pair test below).
+    std::vector<solver::Covariance::Pair> pairs;
+    for (int q = 0; q + 1 < na; ++q)
+      if (!out.anchors[order[q]].used && !out.anchors[order[q + 1]].used)
+        pairs.emplace_back(&V[order[q]], &V[order[q + 1]]);
+    solver::Covariance cov;
+    if (!cov.compute(problem, wanted, pairs, &why)) {
+      for (auto& a : out.anchors) a = ScreenedAnchor{};
+      return done(false, "the anchors do not determine the path (" + why +
+                             "): none can be tested against the others");
+    }
+    // Leave-one-out innovations.
+    std::vector<double> T(na, 0.0);
+    for (int j = 0; j < na; ++j) {
+      ScreenedAnchor& a = out.anchors[j];
+      const Eigen::Matrix3d Rv = V[j].rotation().matrix();
+      const double s = V[j].scale();
+      Eigen::Matrix3d C =
+          Rv.transpose() * cov.block(&V[j]).bottomRightCorner<3, 3>() * Rv / (s * s);
+      C = 0.5 * (C + C.transpose());
+      const Eigen::Vector3d r = anchors[j].y_w - V[j].inverse().translation();
+      const double R = sigma[j] * sigma[j];
+      Eigen::Matrix3d P;
+      Eigen::Vector3d ej;
+      a.testable = true;
+      if (a.used) {
+        // P = (C⁻¹ − R⁻¹)⁻¹ must be positive definite (finite prediction).
+        const Eigen::Matrix3d M = C.inverse() - Eigen::Matrix3d::Identity() / R;
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(0.5 * (M + M.transpose()));
+        const Eigen::Vector3d ev = es.eigenvalues();
+        if (!(ev.minCoeff() > 1e-12 / R)) {
+          a.testable = false;
+        } else {
+          P = es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
+          ej = r + P * r / R;
+        }
+      } else {
+        P = C;
+        ej = r;
+      }
+      if (!a.testable || !P.allFinite() || !ej.allFinite()) {
+        a.testable = false;
+        continue;
+      }
+      e[j] = ej.head<2>();
+      Ph[j] = P.topLeftCorner<2, 2>();
+      Rh[j] = R * Eigen::Matrix2d::Identity();
+      T[j] = e[j].dot((Ph[j] + Rh[j]).ldlt().solve(e[j]));
+      a.innovation_m = e[j].norm();
+      a.sd_m = std::sqrt(0.5 * (Ph[j] + Rh[j]).trace());
+      a.statistic = T[j];
+    }
+    if (in_use < 3) break;
+    // Leave out the worst inconsistent anchors: T above the threshold and the largest among
+    // the in-use neighbours (in keyframe order).
+    std::vector<int> leave;
+    std::vector<int> used_order;
+    for (int j : order)
+      if (out.anchors[j].used) used_order.push_back(j);
+    for (std::size_t q = 0; q < used_order.size(); ++q) {
+      const int j = used_order[q];
+      if (!out.anchors[j].testable || !(T[j] > out.threshold) || flips[j] >= options.max_flips)
+        continue;
+      const bool prev_ok = q == 0 || T[used_order[q - 1]] < T[j];
+      const bool next_ok = q + 1 == used_order.size() || T[used_order[q + 1]] <= T[j];
+      if (prev_ok && next_ok) leave.push_back(j);
+    }
+    // Keep three in use (the worst go first).
+    std::sort(leave.begin(), leave.end(), [&](int a, int b) { return T[a] > T[b]; });
+    if (static_cast<int>(leave.size()) > in_use - 3) leave.resize(std::max(0, in_use - 3));
+    bool changed = false;
+    for (int j : leave) {
+      ScreenedAnchor& a = out.anchors[j];
+      a.used = false;
+      ++flips[j];
+      std::ostringstream w;
+      w.precision(3);
+      w << "inconsistent with the other anchors: " << a.innovation_m
+        << " m from where they and the path put its view (SD " << a.sd_m << " m; test " << T[j]
+        << " > " << out.threshold << ")";
+      a.why = w.str();
+      changed = true;
+    }
+    if (changed) continue;  // re-solve without them at the same k
+    if (!estimate_k) {
+      estimate_k = true;  // the grossly wrong anchors are out: k from the rest from now on
+      continue;
+    }
+    // Drift factor from the anchors in use: the f at which the median of T_j(f·P) is χ²₂'s.
+    std::vector<int> tested;
+    for (int j = 0; j < na; ++j)
+      if (out.anchors[j].used && out.anchors[j].testable) tested.push_back(j);
+    double f = 1.0;
+    if (tested.size() >= 3) {
+      std::vector<double> z(tested.size());
+      auto median_T = [&](double g) {
+        for (std::size_t q = 0; q < tested.size(); ++q) {
+          const int j = tested[q];
+          z[q] = e[j].dot((g * Ph[j] + Rh[j]).ldlt().solve(e[j]));
+        }
+        std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
+        return z[z.size() / 2];
+      };
+      const double target = detail::chi2_2_quantile(0.5);
+      double lo_f = std::log(options.min_factor / k), hi_f = std::log(options.max_factor / k);
+      if (median_T(std::exp(lo_f)) <= target) {
+        f = std::exp(lo_f);
+      } else if (median_T(std::exp(hi_f)) >= target) {
+        f = std::exp(hi_f);
+      } else {
+        for (int it = 0; it < 60; ++it) {
+          const double mid = 0.5 * (lo_f + hi_f);
+          (median_T(std::exp(mid)) > target ? lo_f : hi_f) = mid;
+        }
+        f = std::exp(0.5 * (lo_f + hi_f));
+      }
+    }
+    if (std::abs(std::log(f)) > std::log(1.05)) {
+      k *= f;  // re-solve at the new drift level before deciding
+      continue;
+    }
+    // Left-out anchors consistent with the rest return.
+    auto readmit_anchor = [&](int j) {
+      ScreenedAnchor& a = out.anchors[j];
+      a.used = true;
+      a.why.clear();
+      ++a.readmissions;
+      ++flips[j];
+      changed = true;
+    };
+    for (int j = 0; j < na; ++j) {
+      const ScreenedAnchor& a = out.anchors[j];
+      if (a.used || !a.testable || flips[j] >= options.max_flips || !(T[j] <= readmit)) continue;
+      readmit_anchor(j);
+    }
+    // Two consecutive left-out anchors that agree with each other return together: their
+    // displacement matches the path's between them, so the path (its drift in a turn, say) is
+    // what disagreed with the rest. Two wrong geo-tags are off independently and rarely agree.
+    for (int q = 0; q + 1 < na; ++q) {
+      const int a = order[q], b = order[q + 1];
+      if (out.anchors[a].used || out.anchors[b].used || flips[a] >= options.max_flips ||
+          flips[b] >= options.max_flips)
+        continue;
+      const Eigen::Vector3d ca = V[a].inverse().translation(), cb = V[b].inverse().translation();
+      const Eigen::Vector2d d = ((anchors[b].y_w - anchors[a].y_w) - (cb - ca)).head<2>();
+      auto centre_cov = [&](const lie::Sim3d& X, const lie::Sim3d& Y, const Eigen::MatrixXd& B) {
+        // Cov(c_X, c_Y) from the tangent block: c ← c − (1/s)·Rᵀ·ν.
+        const Eigen::Matrix3d AX = X.rotation().matrix().transpose() / X.scale();
+        const Eigen::Matrix3d AY = Y.rotation().matrix().transpose() / Y.scale();
+        return Eigen::Matrix3d(AX * B.bottomRightCorner<3, 3>() * AY.transpose());
+      };
+      const Eigen::Matrix3d Caa = centre_cov(V[a], V[a], cov.block(&V[a]));
+      const Eigen::Matrix3d Cbb = centre_cov(V[b], V[b], cov.block(&V[b]));
+      const Eigen::Matrix3d Cab = centre_cov(V[a], V[b], cov.block(&V[a], &V[b]));
+      const Eigen::Matrix2d W =
+          (Caa + Cbb - Cab - Cab.transpose()).topLeftCorner<2, 2>() +
+          (sigma[a] * sigma[a] + sigma[b] * sigma[b]) * Eigen::Matrix2d::Identity();
+      if (!(d.dot(W.ldlt().solve(d)) <= readmit)) continue;
+      readmit_anchor(a);
+      readmit_anchor(b);
+    }
+    if (!changed) break;
+  }
+  out.drift_factor = k;
+  int untestable = 0;
+  for (const auto& a : out.anchors) untestable += !a.testable;
+  return done(true, untestable ? std::to_string(untestable) +
+                                     " anchor(s) could not be tested (no prediction from the "
+                                     "others)"
+                               : out.message);
+}
+
+/// Tells `corrector` (before the anchors are streamed into it) to leave out the anchors
+/// `screening` left out; their AnchorDecisions carry the reason, the innovation and the test's
+/// gate (√threshold SDs).
+inline void apply_screening(const AnchorScreening& screening,
+                            const std::vector<map::Correspondence>& anchors, Corrector* corrector) {
+  GEODRIFT_CHECK(screening.anchors.size() == anchors.size(),
+                 "apply_screening: " << screening.anchors.size() << " decisions for "
+                                     << anchors.size() << " anchors");
+  for (std::size_t j = 0; j < anchors.size(); ++j) {
+    const ScreenedAnchor& a = screening.anchors[j];
+    if (a.used) continue;
+    corrector->exclude_correspondence(anchors[j].id, a.why, a.innovation_m,
+                                      a.sd_m * std::sqrt(screening.threshold));
+  }
+}
+
+}  // namespace geodrift::correction
