@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <geodrift/correction/corrector.hpp>
 #include <geodrift/correction/replay.hpp>
+#include <geodrift/correction/screening.hpp>
 #include <geodrift/correction/uncertainty.hpp>
 #include <geodrift/error.hpp>
 #include <geodrift/geo/local_frame.hpp>
@@ -64,6 +65,11 @@ options
                       (docs/correction_model.md): the result does not depend on the map's
                       unit; experimental (better at anchors every 100-200 frames, worse at
                       300-500, and not always convergent from INIT: docs/RESULTS.md)
+  --no-screen-anchors use every anchor as given. By default each anchor is first tested
+                      against all the others along the raw path (leave-one-out, under the VO
+                      drift model, its level estimated from the anchors): one that disagrees
+                      beyond what the VO can have drifted is left out, named on stderr and in
+                      report.json, and marked in topview.svg (docs/correction_model.md)
   --gate-anchors      test each anchor after INIT against the path the previous ones give
                       and leave out those that do not fit (named on stderr and in report.json;
                       INIT's RANSAC outliers too); experimental, off by default: it catches
@@ -182,7 +188,7 @@ int run_correct(int argc, char** argv) {
                   {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
                    "keyframe-step", "links", "weights", "first-window", "min-window-keyframes",
                    "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
-                  {"help", "force", "gate-anchors", "no-uncertainty"});
+                  {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -361,8 +367,28 @@ int run_correct(int argc, char** argv) {
 
   StagedOutput out(out_dir, args.flag("force"));
 
-  // ---- correction --------------------------------------------------------------------------
+  // ---- wrong anchors: each tested against all the others (correction/screening.hpp) --------
   correction::Corrector corrector(opt);
+  correction::AnchorScreening screening;
+  const bool screen = !args.flag("no-screen-anchors");
+  if (screen) {
+    screening = correction::screen_anchors(m.keyframes, corr);
+    if (!screening.ok)
+      std::fprintf(stderr, "geodrift correct: warning: anchors not screened: %s\n",
+                   screening.message.c_str());
+    else if (2 * screening.num_left_out() > static_cast<int>(corr.size()))
+      // The drift level is estimated from the median anchor: with most anchors disagreeing
+      // there is no telling which ones are right.
+      throw Error(std::to_string(screening.num_left_out()) + " of the " +
+                  std::to_string(corr.size()) + " anchors of " + anchors_path +
+                  " disagree with the others beyond what the path can have drifted (anchors of "
+                  "another place or time, a wrong --origin, or a broken trajectory): no "
+                  "trustworthy result, nothing written (--no-screen-anchors uses them all)");
+    else
+      correction::apply_screening(screening, corr, &corrector);
+  }
+
+  // ---- correction --------------------------------------------------------------------------
   const bool tty = stderr_is_tty();
   const auto t0 = std::chrono::steady_clock::now();
   correction::replay(m, corr, &corrector, [&](int i) {
@@ -383,7 +409,8 @@ int run_correct(int argc, char** argv) {
   int after_init = 0, after_init_used = 0;
   for (const auto& d : decisions) {
     used[d.id] = d.used;
-    if (!std::isnan(d.innovation_m)) {
+    const bool screened_out = screening.ok && !screening.anchors[d.id].used;
+    if (!std::isnan(d.innovation_m) && !screened_out) {  // tested by the gate
       ++after_init;
       after_init_used += d.used;
     }
@@ -564,7 +591,15 @@ int run_correct(int argc, char** argv) {
       << ", \"plane_from_camera_up\": " << (ir.plane_from_camera_up ? "true" : "false") << "}"
       << ",\n  \"anchor_residuals_m\": " << residuals
       << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor())
-      << ",\n  \"rejected_window_updates\": " << corrector.rejected_window_updates();
+      << ",\n  \"rejected_window_updates\": " << corrector.rejected_window_updates()
+      << ",\n  \"screening\": {\"enabled\": " << (screen ? "true" : "false")
+      << ", \"ok\": " << (screening.ok ? "true" : "false")
+      << ", \"message\": " << io::detail::json_string(screening.message)
+      << ", \"left_out\": " << screening.num_left_out()
+      << ", \"drift_variance_factor\": " << json_num(screening.ok ? screening.drift_factor : NAN)
+      << ", \"threshold_chi2\": " << json_num(screening.ok ? screening.threshold : NAN)
+      << ", \"rounds\": " << screening.rounds << ", \"seconds\": " << json_num(screening.seconds)
+      << "}";
     {
       std::vector<double> sd;
       for (const auto& C : unc.cov_en) sd.push_back(std::sqrt(C.trace()));
@@ -590,7 +625,11 @@ int run_correct(int argc, char** argv) {
         << ", \"readmitted\": " << (x.readmitted ? "true" : "false")
         << ", \"sigma_m\": " << json_num(a.sigma_m)
         << ", \"innovation_m\": " << json_num(x.innovation_m)
-        << ", \"gate_m\": " << json_num(x.gate_m)
+        << ", \"gate_m\": " << json_num(x.gate_m) << ", \"screening_statistic\": "
+        << json_num(screening.ok ? screening.anchors[x.id].statistic : NAN)
+        << ", \"screening_innovation_m\": "
+        << json_num(screening.ok ? screening.anchors[x.id].innovation_m : NAN)
+        << ", \"screening_sd_m\": " << json_num(screening.ok ? screening.anchors[x.id].sd_m : NAN)
         << ", \"residual_2d_m\": " << json_num(r.head<2>().norm())
         << ", \"residual_3d_m\": " << json_num(r.norm()) << "}";
     }

@@ -20,6 +20,7 @@
 #include "cli_util.hpp"
 #include "commands.hpp"
 #include "geodrift/correction/replay.hpp"
+#include "geodrift/correction/screening.hpp"
 #include "geodrift/correction/uncertainty.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/eval/scale_factor.hpp"
@@ -56,6 +57,10 @@ constexpr const char* kHelp =
     "                     each cell then also gives its ratio to the same run with clean anchors\n"
     "  --gate-anchors     test anchors against the path before using them\n"
     "                     (CorrectorOptions::gate_anchors; off by default)\n"
+    "  --screen-anchors   test every anchor against all the others before the correction\n"
+    "                     and leave out the inconsistent ones (correction/screening.hpp)\n"
+    "  --methods LIST     run only these methods, of init, init+ba, init+pgo, ours, batch,\n"
+    "                     piecewise, piecewise3d (default all)\n"
     "  --weights W        PGO edge weights: paper (default; lambda1 = lambda2 = 1e5, lambda3 = 1)\n"
     "                     | drift (the VO drift model, independent of the map's unit)\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
@@ -98,9 +103,11 @@ struct Cell {
 
 /// How the experiment's runs are set up (the command's options).
 struct Setup {
-  bool paper = false;                                           // --weights paper
-  bool trajectory_only = false;                                 // --trajectory-only
-  bool gate = false;                                            // --gate-anchors
+  bool paper = false;            // --weights paper
+  bool trajectory_only = false;  // --trajectory-only
+  bool gate = false;             // --gate-anchors
+  bool screen = false;           // --screen-anchors
+  std::vector<char> methods;     // --methods: which of kMethods run (all when empty)
   double wrong_fraction = 0, wrong_min_m = 0, wrong_max_m = 0;  // --wrong-anchors
 };
 
@@ -188,8 +195,16 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
     if (intervals[ii] == 100) corr100 = static_cast<int>(corr.size());
     std::vector<char> wrong;
     const auto bad = corrupt(corr, setup, seed, intervals[ii], &wrong);
+    // The screening depends on the anchors and the path only: once per anchor set.
+    correction::AnchorScreening screen_bad, screen_clean;
+    if (setup.screen) {
+      screen_bad = correction::screen_anchors(input.keyframes, bad);
+      if (setup.wrong_fraction > 0)
+        screen_clean = correction::screen_anchors(input.keyframes, corr);
+    }
     for (int m = 0; m < kNumMethods; ++m) {
       if (setup.trajectory_only && kMethods[m].mode == correction::Mode::kInitBa) continue;
+      if (!setup.methods.empty() && !setup.methods[m]) continue;
       correction::CorrectorOptions opt;
       opt.mode = kMethods[m].mode;
       opt.edge_weights = setup.paper ? correction::CorrectorOptions::EdgeWeights::kPaper
@@ -198,6 +213,8 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       Cell& cell = local[{m, static_cast<int>(ii)}];
       auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run) {
         correction::Corrector c(opt);
+        const auto& screening = &cs == &bad ? screen_bad : screen_clean;
+        if (setup.screen && screening.ok) correction::apply_screening(screening, cs, &c);
         correction::replay(input, cs, &c);
         double err = NAN;
         if (c.initialized()) {
@@ -225,11 +242,11 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
         }
         return err;
       };
-      cell.values.push_back(run(setup.wrong_fraction > 0 ? bad : corr, true));
+      cell.values.push_back(run(bad, true));
       if (setup.wrong_fraction > 0) cell.clean.push_back(run(corr, false));
-      if (first_seed && intervals[ii] == plot_interval && m == 0)
-        for (const auto& cc : corr) anchors.push_back(cc.y_w);
     }
+    if (first_seed && intervals[ii] == plot_interval)
+      for (const auto& cc : corr) anchors.push_back(cc.y_w);
     std::lock_guard<std::mutex> lock(*mu);
     ++*done;
     if (stderr_is_tty())
@@ -273,10 +290,10 @@ std::vector<Eigen::Vector2d> xy(const std::vector<Eigen::Vector3d>& p) {
 }  // namespace
 
 int run_experiment(int argc, char** argv) {
-  const Args args(
-      argc, argv,
-      {"sequences", "intervals", "seeds", "data-dir", "threads", "weights", "wrong-anchors", "out"},
-      {"help", "force", "trajectory-only", "gate-anchors"});
+  const Args args(argc, argv,
+                  {"sequences", "intervals", "seeds", "data-dir", "threads", "weights",
+                   "wrong-anchors", "methods", "out"},
+                  {"help", "force", "trajectory-only", "gate-anchors", "screen-anchors"});
   if (args.flag("help")) {
     std::fputs(kHelp, stdout);
     return 0;
@@ -311,6 +328,19 @@ int run_experiment(int argc, char** argv) {
   }
   setup.trajectory_only = args.flag("trajectory-only");
   setup.gate = args.flag("gate-anchors");
+  setup.screen = args.flag("screen-anchors");
+  if (args.has("methods")) {
+    setup.methods.assign(kNumMethods, 0);
+    std::istringstream list(args.get("methods"));
+    for (std::string name; std::getline(list, name, ',');) {
+      try {
+        const correction::Mode mode = correction::mode_from_string(name);
+        for (int m = 0; m < kNumMethods; ++m) setup.methods[m] |= kMethods[m].mode == mode;
+      } catch (const InvalidArgument& e) {
+        throw UsageError(std::string("--methods: ") + e.what());
+      }
+    }
+  }
   if (args.has("wrong-anchors")) {
     const auto w = parse_number_list("wrong-anchors", args.get("wrong-anchors"));
     if (w.size() != 3 || !(w[0] > 0 && w[0] <= 1) || !(w[1] >= 0 && w[2] >= w[1]))
@@ -378,7 +408,8 @@ int run_experiment(int argc, char** argv) {
        << " m in a random horizontal direction (seeded per seed and interval); each cell "
           "gives in brackets the ratio of its mean to the same runs with clean anchors.\n\n";
   md << "PGO edge weights: " << (setup.paper ? "paper (λ1 = λ2 = 1e5, λ3 = 1)" : "drift model")
-     << " (docs/correction_model.md); anchor gate " << (setup.gate ? "on" : "off") << ".\n\n";
+     << " (docs/correction_model.md); anchor gate " << (setup.gate ? "on" : "off")
+     << "; anchor screening " << (setup.screen ? "on" : "off") << ".\n\n";
   for (const std::string& name : seqs) {
     const SeqResult& r = results.at(name);
     md << "## Sequence " << name << "\n\n| method |";
