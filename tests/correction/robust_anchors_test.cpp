@@ -1,5 +1,6 @@
 // Wrong anchors are found and left out without losing correct ones (issue 24, item 3;
-// CorrectorOptions::gate_anchors, docs/correction_model.md "Wrong anchors").
+// CorrectorOptions::gate_anchors and correction/screening.hpp, docs/correction_model.md
+// "Wrong anchors").
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -7,6 +8,7 @@
 #include <string>
 
 #include "geodrift/correction/replay.hpp"
+#include "geodrift/correction/screening.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
@@ -77,4 +79,177 @@ TEST_CASE("Anchors hundreds of metres off are rejected and the path stays near t
   CHECK(rejected_right <= 2);
   CHECK(gated.mean_2d <= 1.2 * clean.mean_2d);
   CHECK(!(blind.mean_2d < 10 * clean.mean_2d));  // the test has teeth: unguarded, they ruin it
+}
+
+// ---- screening: every anchor against all the others (correction/screening.hpp) -------------
+
+namespace {
+
+/// Shifts anchors `which` horizontally by d(rng) metres in a random direction.
+std::vector<map::Correspondence> shifted(std::vector<map::Correspondence> corr,
+                                         const std::vector<int>& which, double lo, double hi,
+                                         unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> d(lo, hi), ang(0, 2 * M_PI);
+  for (int j : which) {
+    const double r = d(rng), a = ang(rng);
+    corr[j].y_w += r * Eigen::Vector3d(std::cos(a), std::sin(a), 0);
+  }
+  return corr;
+}
+
+/// INIT+PGO over the anchors the screening keeps.
+Run correct_screened(const sim::SimulatedSequence& s, const std::vector<map::Correspondence>& corr,
+                     correction::AnchorScreening* screening) {
+  *screening = correction::screen_anchors(s.map.keyframes, corr);
+  REQUIRE(screening->ok);
+  correction::CorrectorOptions opt;
+  opt.mode = correction::Mode::kInitPgo;
+  correction::Corrector c(opt);
+  correction::apply_screening(*screening, corr, &c);
+  correction::replay(s.map, corr, &c);
+  REQUIRE(c.initialized());
+  std::vector<Eigen::Vector3d> est;
+  for (int i = 0; i < c.num_keyframes(); ++i) est.push_back(c.keyframe_center_w(i));
+  return {eval::horizontal_errors(est, s.gt_center_w).all.mean, c.anchor_decisions()};
+}
+
+/// (left out among `wrong`, left out among the others).
+std::pair<int, int> left_out(const correction::AnchorScreening& s, const std::vector<int>& wrong) {
+  int w = 0, r = 0;
+  for (std::size_t j = 0; j < s.anchors.size(); ++j) {
+    const bool is_wrong = std::find(wrong.begin(), wrong.end(), static_cast<int>(j)) != wrong.end();
+    (is_wrong ? w : r) += !s.anchors[j].used;
+  }
+  return {w, r};
+}
+
+}  // namespace
+
+TEST_CASE("Screening's cost on a clean run, over seeds", "[correction][robust]") {
+  // The simulated drift is heavier-tailed than the drift model in turns: there the screening
+  // may leave out a correct anchor or two, and the path near it is worse for the longer gap.
+  // Over the whole sequences (docs/RESULTS.md) the cost is within 4 %; this turn-heavy stretch
+  // is its worst case measured: 1.11x over 5 seeds (known, documented; the bound guards it).
+  double sum_screened = 0, sum_unscreened = 0;
+  for (unsigned seed = 1; seed <= 5; ++seed) {
+    const sim::SimulatedSequence s = simulate_02(seed, 2500);
+    const auto corr = sim::kitti_correspondences(s, 100);
+    correction::AnchorScreening sc;
+    const Run unscreened = correct(s, corr, /*gate=*/false);
+    const Run screened = correct_screened(s, corr, &sc);
+    INFO("seed " << seed << ": mean 2D error " << screened.mean_2d << " m (unscreened "
+                 << unscreened.mean_2d << " m), drift factor " << sc.drift_factor << ", left out "
+                 << sc.num_left_out() << " of " << corr.size());
+    CHECK(sc.num_left_out() <= 2);
+    sum_screened += screened.mean_2d;
+    sum_unscreened += unscreened.mean_2d;
+  }
+  INFO("mean over 5 seeds: screened " << sum_screened / 5 << " m, unscreened " << sum_unscreened / 5
+                                      << " m");
+  CHECK(sum_screened <= 1.15 * sum_unscreened);
+}
+
+TEST_CASE("Screening leaves out wrong anchors, INIT's among them, and keeps the right ones",
+          "[correction][robust]") {
+  const sim::SimulatedSequence s = simulate_02(3, 2500);
+  const auto corr = sim::kitti_correspondences(s, 100);
+  REQUIRE(corr.size() >= 20);
+  correction::AnchorScreening sc;
+  // Wrong anchors are measured against the screened clean run (the screening's own cost on
+  // clean anchors is the test case above) and against the right anchors alone.
+  const Run clean = correct_screened(s, corr, &sc);
+  // What knowing the wrong anchors would give: the correction over the right ones alone.
+  auto oracle = [&](const std::vector<int>& wrong) {
+    std::vector<map::Correspondence> right;
+    for (int j = 0; j < static_cast<int>(corr.size()); ++j)
+      if (std::find(wrong.begin(), wrong.end(), j) == wrong.end()) right.push_back(corr[j]);
+    return correct(s, right, /*gate=*/false).mean_2d;
+  };
+
+  SECTION("10 % by 200-1000 m, one of them among INIT's four") {
+    std::vector<int> wrong{1};
+    for (int j = 6; j < static_cast<int>(corr.size()); j += 10) wrong.push_back(j);
+    const Run r = correct_screened(s, shifted(corr, wrong, 200, 1000, 7), &sc);
+    const auto [w, right] = left_out(sc, wrong);
+    INFO("mean 2D error " << r.mean_2d << " m (clean " << clean.mean_2d << " m); left out " << w
+                          << " of " << wrong.size() << " wrong, " << right << " correct");
+    CHECK(w == static_cast<int>(wrong.size()));
+    CHECK(right <= 2);
+    CHECK(r.mean_2d <= 1.2 * clean.mean_2d);
+    for (int j : wrong) CHECK(!r.decisions[j].used);  // the Corrector honoured it
+  }
+  SECTION("30 % by 20-60 m") {
+    std::vector<int> idx;
+    for (int j = 4; j < static_cast<int>(corr.size()); ++j) idx.push_back(j);
+    std::shuffle(idx.begin(), idx.end(), std::mt19937(11));
+    const std::vector<int> wrong(idx.begin(), idx.begin() + (3 * idx.size() + 5) / 10);
+    const Run r = correct_screened(s, shifted(corr, wrong, 20, 60, 13), &sc);
+    const auto [w, right] = left_out(sc, wrong);
+    const double floor = oracle(wrong);
+    // Without 30 % of its anchors the path is worse than the clean one however well they are
+    // found (the gaps between the rest are longer): the screening's yardstick is the oracle.
+    INFO("mean 2D error " << r.mean_2d << " m (clean " << clean.mean_2d
+                          << " m, right anchors alone " << floor << " m); left out " << w << " of "
+                          << wrong.size() << " wrong, " << right << " correct");
+    CHECK(w == static_cast<int>(wrong.size()));
+    CHECK(right <= 2);
+    CHECK(r.mean_2d <= 1.05 * floor);
+  }
+}
+
+TEST_CASE("Screening does not depend on the map's unit, origin or orientation",
+          "[correction][robust]") {
+  const sim::SimulatedSequence s = simulate_02(2, 1500);
+  auto corr = sim::kitti_correspondences(s, 100);
+  corr = shifted(corr, {5, 9}, 50, 100, 3);
+  const auto a = correction::screen_anchors(s.map.keyframes, corr);
+  REQUIRE(a.ok);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (double scale : {1e-3, 1e3}) {
+    // p_M' = scale·R·p_M + t: T_cw' = T_cw·T⁻¹ with translations scaled; T_vk scaled alike.
+    const Eigen::Vector3d w(u(rng), u(rng), u(rng)), t(100 * u(rng), 100 * u(rng), 100 * u(rng));
+    const lie::SE3d G(lie::SO3d::exp(w), t);  // M -> M' before scaling
+    std::vector<map::Keyframe> kfs = s.map.keyframes;
+    for (auto& k : kfs) {
+      lie::SE3d T = k.T_cw * G.inverse();
+      k.T_cw = lie::SE3d(T.rotation(), scale * T.translation());
+    }
+    auto corr2 = corr;
+    for (auto& c : corr2) {
+      c.T_vk = lie::SE3d(c.T_vk.rotation(), scale * c.T_vk.translation());
+      // The PnP covariance (ω, ν) in M units: ν rows and columns scale with the map.
+      c.pose_cov.block<3, 3>(0, 3) *= scale;
+      c.pose_cov.block<3, 3>(3, 0) *= scale;
+      c.pose_cov.block<3, 3>(3, 3) *= scale * scale;
+    }
+    const auto b = correction::screen_anchors(kfs, corr2);
+    REQUIRE(b.ok);
+    CHECK(b.drift_factor == Approx(a.drift_factor).epsilon(1e-6));
+    for (std::size_t j = 0; j < corr.size(); ++j) {
+      INFO("scale " << scale << ", anchor " << j);
+      CHECK(b.anchors[j].used == a.anchors[j].used);
+      CHECK(b.anchors[j].statistic == Approx(a.anchors[j].statistic).epsilon(1e-6).margin(1e-9));
+    }
+  }
+}
+
+TEST_CASE("Screening reports what it cannot test and rejects what it cannot read",
+          "[correction][robust]") {
+  const sim::SimulatedSequence s = simulate_02(1, 600);
+  auto corr = sim::kitti_correspondences(s, 100);
+  REQUIRE(corr.size() >= 3);
+  corr.resize(2);
+  const auto r = correction::screen_anchors(s.map.keyframes, corr);
+  CHECK(!r.ok);
+  CHECK(r.message.find("fewer than 3") != std::string::npos);
+  CHECK(r.num_left_out() == 0);
+  corr[1].keyframe = 1 << 30;
+  CHECK_THROWS_WITH(correction::screen_anchors(s.map.keyframes, corr),
+                    Catch::Contains("unknown keyframe"));
+  corr[1].keyframe = corr[0].keyframe;
+  corr[1].y_w.x() = std::nan("");
+  CHECK_THROWS_WITH(correction::screen_anchors(s.map.keyframes, corr),
+                    Catch::Contains("not finite"));
 }
