@@ -80,8 +80,8 @@ struct AnchorScreeningOptions {
   /// χ²₂ quantile above which an anchor is left out (−2·ln(1 − p) = 13.8 at 0.999: a correct
   /// anchor is lost once in a thousand).
   double probability = 0.99999;
-  /// χ²₂ quantile below which a left-out anchor returns (lower than `probability`, so an anchor
-  /// near the threshold does not go in and out).
+  /// χ²₂ quantile below which a left-out anchor returns (at most `probability`; max_flips
+  /// bounds an anchor near the threshold going in and out).
   double readmit_probability = 0.99999;
   /// σ of anchors whose sigma_m is not > 0 (metres).
   double default_sigma_m = 1.0;
