@@ -45,7 +45,8 @@
 /// correct anchors; at 0.99999 about 0.3 %, while a 20 m shift 100 frames from its neighbours
 /// still stands out. What it cannot do: tell a wrong anchor from a correct one after a turn
 /// the model underrates, when both disagree with the rest alike (docs/correction_model.md
-/// "Wrong anchors, screened": a clean run costs 0-4 % over the sequences, 11 % on a turn-heavy stretch).
+/// "Wrong anchors, screened": a clean run costs 0-4 % over the sequences, 11 % on a turn-heavy
+/// stretch).
 ///
 /// Fewer than three anchors, or anchors whose prediction is not determined (all on one point),
 /// cannot be tested: they stay in use, and the result says so.
