@@ -155,6 +155,18 @@ TEST_CASE("Corrector refuses bad input with a message naming it", "[correction]"
   corr.keyframe = 7;
   CHECK_THROWS_WITH(c.add_correspondence(corr), Catch::Contains("unknown keyframe 7"));
   CHECK_THROWS_WITH(c.keyframe_center_w(0), Catch::Contains("not initialised"));
+  map::Keyframe far;
+  far.id = 2;
+  far.timestamp = 1.0;
+  far.T_cw = lie::SE3d(lie::SO3d(), Eigen::Vector3d(0, 2e12, 0));
+  CHECK_THROWS_WITH(c.add_keyframe(far),
+                    Catch::Contains("keyframe 2 translation") && Catch::Contains("exceeds 1e+12"));
+  map::MapPoint p;
+  p.id = 3;
+  p.reference_keyframe = 1;
+  p.position = Eigen::Vector3d(-1e300, 0, 0);
+  CHECK_THROWS_WITH(c.add_point(p),
+                    Catch::Contains("map point 3 position") && Catch::Contains("exceeds 1e+12"));
   correction::CorrectorOptions bad;
   bad.lambda1 = -1;
   CHECK_THROWS_WITH(correction::Corrector(bad), Catch::Contains("lambda"));

@@ -367,6 +367,8 @@ TEST_CASE("Piecewise rejects degenerate input with a message naming the problem"
     const lie::SE3d huge(lie::SO3d(), Eigen::Vector3d(1e308, 0, 0));
     raw[5] = huge * huge;  // overflows to inf (the constructor itself rejects non-finite input)
     CHECK_INVALID(run(raw, sc.anchors, sc.up_m), "keyframe 5 pose is not finite");
+    raw[5] = huge;  // finite, but beyond map::kMaxMapCoordinate
+    CHECK_INVALID(run(raw, sc.anchors, sc.up_m), "keyframe 5 translation");
     auto anchors = sc.anchors;
     anchors[2].y_w.z() = nan;
     CHECK_INVALID(run(sc.raw, anchors, sc.up_m), "anchor 2 position is not finite");

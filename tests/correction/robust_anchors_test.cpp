@@ -252,4 +252,10 @@ TEST_CASE("Screening reports what it cannot test and rejects what it cannot read
   corr[1].y_w.x() = std::nan("");
   CHECK_THROWS_WITH(correction::screen_anchors(s.map.keyframes, corr),
                     Catch::Contains("not finite"));
+  corr[1].y_w.x() = 0.0;
+  auto kfs = s.map.keyframes;
+  kfs[7].T_cw = lie::SE3d(kfs[7].T_cw.rotation(), Eigen::Vector3d(1e300, 0, 0));
+  CHECK_THROWS_WITH(correction::screen_anchors(kfs, corr),
+                    Catch::Contains("keyframe " + std::to_string(kfs[7].id) + " translation") &&
+                        Catch::Contains("exceeds 1e+12"));
 }

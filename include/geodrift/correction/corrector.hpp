@@ -393,11 +393,13 @@ class Corrector {
   }
 
   /// Adds a keyframe (raw pose in M). Keyframes must arrive in time order.
-  /// @throws InvalidArgument on a duplicate id, unknown camera, non-finite pose or timestamp
-  ///         earlier than the previous keyframe's.
+  /// @throws InvalidArgument on a duplicate id, unknown camera, non-finite pose, a translation
+  ///         beyond map::kMaxMapCoordinate, or a timestamp earlier than the previous keyframe's.
   void add_keyframe(const map::Keyframe& kf) {
     GEODRIFT_CHECK(!kf_index_.count(kf.id), "keyframe id " << kf.id << " added twice");
     GEODRIFT_CHECK(kf.T_cw.matrix().allFinite(), "keyframe " << kf.id << " pose is not finite");
+    map::check_map_coordinates(kf.T_cw.translation(), "add_keyframe", "keyframe", kf.id,
+                               "translation");
     GEODRIFT_CHECK(std::isfinite(kf.timestamp), "keyframe " << kf.id << " timestamp not finite");
     GEODRIFT_CHECK(cameras_.empty() || cameras_.count(kf.camera_id),
                    "keyframe " << kf.id << " names unknown camera " << kf.camera_id);
@@ -417,6 +419,7 @@ class Corrector {
   void add_point(const map::MapPoint& p) {
     GEODRIFT_CHECK(!pt_index_.count(p.id), "map point id " << p.id << " added twice");
     GEODRIFT_CHECK(p.position.allFinite(), "map point " << p.id << " position is not finite");
+    map::check_map_coordinates(p.position, "add_point", "map point", p.id, "position");
     GEODRIFT_CHECK(
         kf_index_.count(p.reference_keyframe),
         "map point " << p.id << " names unknown reference keyframe " << p.reference_keyframe);

@@ -28,6 +28,7 @@
 #include "geodrift/lie/se3.hpp"
 #include "geodrift/lie/sim3.hpp"
 #include "geodrift/lie/so3.hpp"
+#include "geodrift/map/keyframe.hpp"
 
 namespace geodrift::correction {
 
@@ -180,9 +181,11 @@ inline PiecewiseResult piecewise_similarity(const std::vector<lie::SE3d>& T_cw,
   const bool planar = options.variant == PiecewiseVariant::k2D;
   const int n = static_cast<int>(T_cw.size());
   GEODRIFT_CHECK(n > 0, "piecewise: no keyframes");
-  for (int i = 0; i < n; ++i)
+  for (int i = 0; i < n; ++i) {
     GEODRIFT_CHECK(T_cw[i].matrix().allFinite(),
                    "piecewise: keyframe " << i << " pose is not finite");
+    map::check_map_coordinates(T_cw[i].translation(), "piecewise", "keyframe", i, "translation");
+  }
   GEODRIFT_CHECK(anchors.size() >= 2,
                  "piecewise: " << anchors.size() << " anchor(s), at least 2 are needed");
   for (std::size_t j = 0; j < anchors.size(); ++j) {

@@ -179,6 +179,8 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   for (int i = 0; i < nk; ++i) {
     GEODRIFT_CHECK(keyframes[i].T_cw.matrix().allFinite(),
                    "anchor screening: keyframe " << keyframes[i].id << " pose is not finite");
+    map::check_map_coordinates(keyframes[i].T_cw.translation(), "anchor screening", "keyframe",
+                               keyframes[i].id, "translation");
     kf_index[keyframes[i].id] = i;
   }
   std::vector<int> kf_of(na);
