@@ -266,15 +266,22 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   // The graph with priors on the anchors `use`, solved from S, V at the drift factor k.
   auto solve = [&](const std::vector<char>& use, solver::Problem* problem) {
     const solver::RobustLoss trivial;
-    for (int i = 1; i < nk; ++i)
-      problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
-                                  info(step_cov[i], k), &S[i - 1], &S[i]);
-    for (int j = 0; j < na; ++j) {
-      problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}, trivial,
-                                  info(offset_cov[j], k), &S[kf_of[j]], &V[j]);
-      if (use[j])
-        problem->add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{anchors[j].y_w},
-                                    trivial, 1.0 / (sigma[j] * sigma[j]), &V[j]);
+    // Blocks take the order they first appear in, and that is the factor's natural order: a
+    // view node with its prior comes just before its keyframe and is eliminated, a leaf,
+    // without fill; a left-out one just after it, with one block of fill. With every view
+    // after all the keyframes, dense anchors filled the factor in (as in uncertainty.hpp).
+    for (int i = 0, q = 0; i < nk; ++i) {
+      for (; q < na && kf_of[order[q]] == i; ++q) {
+        const int j = order[q];
+        if (use[j])
+          problem->add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{anchors[j].y_w},
+                                      trivial, 1.0 / (sigma[j] * sigma[j]), &V[j]);
+        problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}, trivial,
+                                    info(offset_cov[j], k), &S[i], &V[j]);
+      }
+      if (i > 0)
+        problem->add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
+                                    info(step_cov[i], k), &S[i - 1], &S[i]);
     }
     solver::Options lm;
     lm.max_iterations = options.max_iterations;

@@ -32,8 +32,10 @@
 
 #include <Eigen/Core>
 #include <Eigen/Dense>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -131,6 +133,11 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
     kf_of[j] = corrector.keyframe_index(c.keyframe);
   }
 
+  std::vector<int> by_keyframe(na);  // anchors in keyframe order (stable)
+  std::iota(by_keyframe.begin(), by_keyframe.end(), 0);
+  std::stable_sort(by_keyframe.begin(), by_keyframe.end(),
+                   [&](int a, int b) { return kf_of[a] < kf_of[b]; });
+
   std::vector<lie::Sim3d> S(nk), V(na);
   for (int i = 0; i < nk; ++i) S[i] = corrector.keyframe_sim3(i);
   for (int j = 0; j < na; ++j) V[j] = offsets[j] * S[kf_of[j]];
@@ -146,14 +153,21 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
   for (int it = 0;; ++it) {
     solver::Problem problem;
     const solver::RobustLoss trivial;
-    for (int i = 1; i < nk; ++i)
-      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
-                                 info(step_cov[i], k_d), &S[i - 1], &S[i]);
-    for (int j = 0; j < na; ++j) {
-      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[j]}, trivial,
-                                 info(offset_cov[j], k_a), &S[kf_of[j]], &V[j]);
-      problem.add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{corr[j].y_w},
-                                 trivial, 1.0 / (k_a * tag_sd[j] * tag_sd[j]), &V[j]);
+    // Blocks are registered in the order they first appear, and that order is the factor's
+    // natural order: each view node V_j (a leaf on its keyframe) comes just before its
+    // keyframe, so eliminating it fills nothing. With every V after all the keyframes instead,
+    // dense anchors (GNSS every keyframe) made the factor fill in: 2.8 GB and 140 s for 20k.
+    for (int i = 0, j = 0; i < nk; ++i) {
+      for (; j < na && kf_of[by_keyframe[j]] == i; ++j) {
+        const int a = by_keyframe[j];
+        problem.add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{corr[a].y_w},
+                                   trivial, 1.0 / (k_a * tag_sd[a] * tag_sd[a]), &V[a]);
+        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{offsets[a]}, trivial,
+                                   info(offset_cov[a], k_a), &S[i], &V[a]);
+      }
+      if (i > 0)
+        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{steps[i]}, trivial,
+                                   info(step_cov[i], k_d), &S[i - 1], &S[i]);
     }
     solver::Options lm;
     lm.max_iterations = options.max_iterations;
