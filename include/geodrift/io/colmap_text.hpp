@@ -221,13 +221,18 @@ inline ColmapModel read_colmap_text(const std::string& dir) {
         detail::parse_error(images_path, line,
                             "image " + std::to_string(im.kf.id) + " names unknown CAMERA_ID " +
                                 std::to_string(im.kf.camera_id));
-      // NAME may contain spaces: everything after the 9th field.
+      // NAME may contain spaces: everything after the 9th field. The fields are separated by the
+      // same whitespace as split_ws() (isspace: a form feed or vertical tab separates too), so
+      // the 10 fields found above guarantee a position here.
       {
+        const char* kWs = " \t\n\v\f\r";
         std::size_t pos = 0;
-        for (int k = 0; k < 9; ++k) {
-          pos = text.find_first_not_of(" \t", pos);
-          pos = text.find_first_of(" \t", pos);
+        for (int k = 0; k < 9 && pos != std::string::npos; ++k) {
+          pos = text.find_first_not_of(kWs, pos);
+          pos = text.find_first_of(kWs, pos);
         }
+        if (pos == std::string::npos)
+          detail::parse_error(images_path, line, "image line has no NAME after CAMERA_ID");
         im.name = detail::trim(text.substr(pos));
       }
       detail::frame_from_image_name(im.name, &im.name_frame, &im.name_time);
