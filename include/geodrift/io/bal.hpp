@@ -27,6 +27,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -211,9 +212,12 @@ inline BalProblem parse_bal(std::istream& in, const std::string& name) {
     tok.fail(os.str());
   }
   BalProblem p;
-  p.observations.resize(static_cast<std::size_t>(no));
+  // The header counts are only claims until the values are read: grow with the file instead of
+  // allocating them up front (a 20-byte header could otherwise ask for tens of GB).
+  constexpr long kReserveMax = 1L << 16;
+  p.observations.reserve(static_cast<std::size_t>(std::min(no, kReserveMax)));
   for (long k = 0; k < no; ++k) {
-    BalObservation& o = p.observations[static_cast<std::size_t>(k)];
+    BalObservation& o = p.observations.emplace_back();
     const std::string what = "observation " + std::to_string(k);
     const long c = tok.next_int(what + " camera index");
     if (c < 0 || c >= nc) {
@@ -231,7 +235,7 @@ inline BalProblem parse_bal(std::istream& in, const std::string& name) {
     o.pixel.y() = tok.next_double(what + " y");
   }
   static const char* kCamFields[9] = {"w1", "w2", "w3", "t1", "t2", "t3", "f", "k1", "k2"};
-  p.cameras.resize(static_cast<std::size_t>(nc));
+  p.cameras.reserve(static_cast<std::size_t>(std::min(nc, kReserveMax)));
   for (long k = 0; k < nc; ++k) {
     double v[9];
     for (int m = 0; m < 9; ++m) {
@@ -241,18 +245,18 @@ inline BalProblem parse_bal(std::istream& in, const std::string& name) {
       tok.fail("camera " + std::to_string(k) + ": focal length " + std::to_string(v[6]) +
                " must be > 0");
     }
-    BalCamera& cam = p.cameras[static_cast<std::size_t>(k)];
+    BalCamera& cam = p.cameras.emplace_back();
     cam.angle_axis = Eigen::Vector3d(v[0], v[1], v[2]);
     cam.t = Eigen::Vector3d(v[3], v[4], v[5]);
     cam.f = v[6];
     cam.k1 = v[7];
     cam.k2 = v[8];
   }
-  p.points.resize(static_cast<std::size_t>(np));
+  p.points.reserve(static_cast<std::size_t>(std::min(np, kReserveMax)));
   for (long k = 0; k < np; ++k) {
+    Eigen::Vector3d& X = p.points.emplace_back();
     for (int m = 0; m < 3; ++m) {
-      p.points[static_cast<std::size_t>(k)][m] =
-          tok.next_double("point " + std::to_string(k) + " coordinate " + std::to_string(m));
+      X[m] = tok.next_double("point " + std::to_string(k) + " coordinate " + std::to_string(m));
     }
   }
   if (!tok.at_end()) tok.fail("trailing content after the last point");
