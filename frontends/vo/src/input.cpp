@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 #include <sstream>
+#include <utility>
 
 #include "geodrift/error.hpp"
 
@@ -27,6 +28,9 @@ std::vector<double> numbers_after(const std::string& line, std::size_t pos) {
   while (is >> x) v.push_back(x);
   return v;
 }
+
+/// Largest image width or height a calibration file may state (pixels).
+constexpr int kMaxImageSide = 1 << 20;
 
 bool read_text_calibration(const std::string& path, Calibration* c) {
   std::ifstream in(path);
@@ -54,6 +58,11 @@ bool read_text_calibration(const std::string& path, Calibration* c) {
     } else if (key == "D") {
       c->distortion = v;
     } else if (key == "size" && v.size() == 2) {
+      // Checked before the cast: a double outside int's range does not convert (UB).
+      for (double d : v)
+        GEODRIFT_CHECK(d >= 0 && d <= kMaxImageSide && d == std::floor(d),
+                       path << ":" << lineno << ": image size " << d << " is not an integer in [0, "
+                            << kMaxImageSide << "]");
       c->camera.width = static_cast<int>(v[0]);
       c->camera.height = static_cast<int>(v[1]);
     }
@@ -69,10 +78,22 @@ bool read_yaml_calibration(const std::string& path, Calibration* c) {
     return false;
   }
   cv::Mat K, D;
-  for (const char* name : {"camera_matrix", "K"})
-    if (!fs[name].empty()) fs[name] >> K;
-  for (const char* name : {"distortion_coefficients", "D"})
-    if (!fs[name].empty()) fs[name] >> D;
+  // OpenCV throws cv::Exception for a node that is not a matrix (a scalar, a sequence, a
+  // malformed !!opencv-matrix); geodrift reports it as its own error naming the file.
+  const auto read_matrix = [&](std::initializer_list<const char*> names, cv::Mat* m) {
+    for (const char* name : names) {
+      try {
+        if (!fs[name].empty()) fs[name] >> *m;
+      } catch (const cv::Exception& e) {
+        throw InvalidArgument(path + ": '" + name + "' is not a readable OpenCV matrix (" + e.err +
+                              ")");
+      }
+      GEODRIFT_CHECK(m->empty() || m->channels() == 1,
+                     path << ": '" << name << "' has " << m->channels() << " channels, expected 1");
+    }
+  };
+  read_matrix({"camera_matrix", "K"}, &K);
+  read_matrix({"distortion_coefficients", "D"}, &D);
   if (K.empty()) return false;
   GEODRIFT_CHECK(K.rows == 3 && K.cols == 3,
                  path << ": camera matrix is " << K.rows << "x" << K.cols << ", expected 3x3");
@@ -85,8 +106,17 @@ bool read_yaml_calibration(const std::string& path, Calibration* c) {
     D.convertTo(D, CV_64F);
     c->distortion.assign(D.begin<double>(), D.end<double>());
   }
-  if (!fs["image_width"].empty()) c->camera.width = static_cast<int>(fs["image_width"]);
-  if (!fs["image_height"].empty()) c->camera.height = static_cast<int>(fs["image_height"]);
+  const std::pair<const char*, int*> sizes[] = {{"image_width", &c->camera.width},
+                                                {"image_height", &c->camera.height}};
+  for (const auto& [name, out] : sizes) {
+    const cv::FileNode n = fs[name];
+    if (n.empty()) continue;
+    // Read as a real and checked before the cast (an int node converts exactly).
+    const double v = n.isInt() || n.isReal() ? static_cast<double>(n) : -1.0;
+    GEODRIFT_CHECK(v >= 0 && v <= kMaxImageSide && v == std::floor(v),
+                   path << ": " << name << " is not an integer in [0, " << kMaxImageSide << "]");
+    *out = static_cast<int>(v);
+  }
   return true;
 }
 
