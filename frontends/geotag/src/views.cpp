@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <optional>
@@ -51,6 +52,17 @@ double parse_number(const std::string& text, const std::string& path, int line,
     fail(path, line, field + " '" + text + "' is not a number");
   if (!std::isfinite(v)) fail(path, line, field + " '" + text + "' is not finite");
   return v;
+}
+
+/// A whole number in int's range (ids, frame indices): checked before the cast, as converting a
+/// double outside the range is undefined.
+int parse_int(const std::string& text, const std::string& path, int line,
+              const std::string& field) {
+  const double v = parse_number(text, path, line, field);
+  if (v != std::floor(v) || v < std::numeric_limits<int>::min() ||
+      v > std::numeric_limits<int>::max())
+    fail(path, line, field + " '" + text + "' is not an integer in int's range");
+  return static_cast<int>(v);
 }
 
 std::uint32_t be32(const unsigned char* p) {
@@ -163,8 +175,8 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
       fail(csv_path, lineno,
            std::to_string(f.size()) + " fields, header has " + std::to_string(header.size()));
     GeoSource s;
-    s.tag.id = c_id >= 0 ? static_cast<int>(parse_number(f[c_id], csv_path, lineno, "id"))
-                         : static_cast<int>(out.size());
+    s.tag.id =
+        c_id >= 0 ? parse_int(f[c_id], csv_path, lineno, "id") : static_cast<int>(out.size());
     if (f[c_file].empty()) fail(csv_path, lineno, "empty file name");
     fs::path p(f[c_file]);
     if (p.is_relative()) {
@@ -213,7 +225,7 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
                         ? std::fmod(std::fmod(heading_deg, 360.0) + 360.0, 360.0) * kDeg
                         : std::numeric_limits<double>::quiet_NaN();
     if (c_frame >= 0 && !f[c_frame].empty())
-      s.frame = static_cast<int>(parse_number(f[c_frame], csv_path, lineno, "frame"));
+      s.frame = parse_int(f[c_frame], csv_path, lineno, "frame");
     int w = 0, h = 0;
     if (!fs::is_regular_file(p)) fail(csv_path, lineno, "image '" + s.path + "' does not exist");
     if (!image_size(s.path, &w, &h))
