@@ -80,10 +80,22 @@ bool read_yaml_calibration(const std::string& path, Calibration* c) {
   cv::Mat K, D;
   // OpenCV throws cv::Exception for a node that is not a matrix (a scalar, a sequence, a
   // malformed !!opencv-matrix); geodrift reports it as its own error naming the file.
+  // OpenCV also allocates rows x cols before it counts the data, so a calibration matrix's size
+  // is checked first (K is 3x3, D at most 1x14 or 14x1).
   const auto read_matrix = [&](std::initializer_list<const char*> names, cv::Mat* m) {
     for (const char* name : names) {
       try {
-        if (!fs[name].empty()) fs[name] >> *m;
+        const cv::FileNode node = fs[name];
+        if (node.empty()) continue;
+        if (node.isMap()) {
+          for (const char* dim : {"rows", "cols"}) {
+            const cv::FileNode d = node[dim];
+            GEODRIFT_CHECK(d.isInt() && static_cast<int>(d) >= 1 && static_cast<int>(d) <= 16,
+                           path << ": '" << name << "' " << dim
+                                << " is not an integer in [1, 16] (a calibration matrix)");
+          }
+        }
+        node >> *m;
       } catch (const cv::Exception& e) {
         throw InvalidArgument(path + ": '" + name + "' is not a readable OpenCV matrix (" + e.err +
                               ")");
