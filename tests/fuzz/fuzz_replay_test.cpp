@@ -138,6 +138,13 @@ TEST_CASE("Fuzz finding: calibration sizes and OpenCV matrices are checked, nami
                            "image_width: 1e300\n",
                            load);
   CHECK(what.find("width.yaml: image_width is not an integer") != std::string::npos);
+  // OpenCV allocated rows x cols (85 GB here) before counting the data.
+  what = geodrift_error_of("rows.yaml",
+                           "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows:x\n"
+                           "   rows: 1\n   cols: 5\n   dt: d\n   data: [ 1, 2, 3, 4, 5 ]\n",
+                           load);
+  CHECK(what.find("rows.yaml: 'camera_matrix' rows is not an integer in [1, 16]") !=
+        std::string::npos);
 }
 
 TEST_CASE("Fuzz finding: geo-tag CSV ids and frames outside int are parse errors",
