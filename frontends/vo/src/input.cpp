@@ -72,9 +72,13 @@ bool read_text_calibration(const std::string& path, Calibration* c) {
 
 bool read_yaml_calibration(const std::string& path, Calibration* c) {
   cv::FileStorage fs;
+  // Not a FileStorage file: no calibration found here (load_calibration says so). OpenCV's
+  // parser throws cv::Exception for most malformed files but std::length_error for some (an
+  // unknown !!type tag followed by a key without a value), so any std::exception means "not
+  // parsable".
   try {
     if (!fs.open(path, cv::FileStorage::READ)) return false;
-  } catch (const cv::Exception&) {
+  } catch (const std::exception&) {
     return false;
   }
   cv::Mat K, D;
@@ -99,6 +103,11 @@ bool read_yaml_calibration(const std::string& path, Calibration* c) {
       } catch (const cv::Exception& e) {
         throw InvalidArgument(path + ": '" + name + "' is not a readable OpenCV matrix (" + e.err +
                               ")");
+      } catch (const Error&) {
+        throw;
+      } catch (const std::exception& e) {
+        throw InvalidArgument(path + ": '" + name + "' is not a readable OpenCV matrix (" +
+                              e.what() + ")");
       }
       GEODRIFT_CHECK(m->empty() || m->channels() == 1,
                      path << ": '" << name << "' has " << m->channels() << " channels, expected 1");
