@@ -145,6 +145,12 @@ TEST_CASE("Fuzz finding: calibration sizes and OpenCV matrices are checked, nami
                            load);
   CHECK(what.find("rows.yaml: 'camera_matrix' rows is not an integer in [1, 16]") !=
         std::string::npos);
+  // OpenCV's parser threw std::length_error for an unknown tag followed by ':dt d'.
+  what = geodrift_error_of("tag.yaml",
+                           "%YAML:1.0\n---\nK: !!oqencv-matrix\n   rows: 3\n   cols: 3\n"
+                           "   :dt d\n   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]\n",
+                           load);
+  CHECK(what.find("tag.yaml' has no 'P0:' line") != std::string::npos);
 }
 
 TEST_CASE("Fuzz finding: geo-tag CSV ids and frames outside int are parse errors",
