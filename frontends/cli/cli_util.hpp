@@ -1,7 +1,7 @@
 #pragma once
 /// @file
-/// Helpers shared by the subcommands: option parsing, the staged output directory (no partial
-/// outputs), progress on a TTY, and small formatting helpers.
+/// Helpers shared by the subcommands: option parsing, progress on a TTY, and small formatting
+/// helpers; the atomic output folder (no partial outputs) is in output_dir.hpp.
 
 #include <unistd.h>
 
@@ -17,6 +17,8 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "output_dir.hpp"
 
 namespace geodrift::cli {
 
@@ -117,85 +119,6 @@ inline std::vector<double> parse_number_list(const std::string& option, const st
 
 /// True when stderr is a terminal (progress is shown only then).
 inline bool stderr_is_tty() { return ::isatty(::fileno(stderr)) != 0; }
-
-/// The output directory of a subcommand, staged: everything is written into a temporary
-/// directory beside --out (same parent, so the final rename is atomic) and moved into place by
-/// commit(). Without commit() (an error), the temporary directory is removed and --out is left
-/// exactly as it was. --out that is an existing file is an error; an existing non-empty
-/// directory is refused unless `force` (then files of the same name in it are replaced, others
-/// are kept).
-class StagedOutput {
- public:
-  /// Checks --out and creates the staging directory.
-  /// @throws Error naming the problem.
-  StagedOutput(const std::string& out, bool force) : out_(out) {
-    namespace fs = std::filesystem;
-    std::error_code ec;
-    if (out.empty()) throw Error("--out is empty");
-    fs::path p(out);
-    if (p.filename().empty()) p = p.parent_path();  // "dir/" -> "dir"
-    out_ = p;
-    if (fs::exists(p, ec)) {
-      if (!fs::is_directory(p, ec))
-        throw Error("--out '" + out +
-                    "' exists and is not a directory (refusing to replace a file)");
-      existed_ = true;
-      if (!fs::is_empty(p, ec) && !force)
-        throw Error("--out '" + out +
-                    "' exists and is not empty (refusing to overwrite; use --force to replace "
-                    "the files geodrift writes there)");
-    }
-    const fs::path parent = p.has_parent_path() ? p.parent_path() : fs::path(".");
-    if (!fs::is_directory(parent, ec))
-      throw Error("--out '" + out + "': parent directory '" + parent.string() + "' does not exist");
-    for (int k = 0; k < 1000; ++k) {
-      fs::path t = parent / ("." + p.filename().string() + ".geodrift-tmp-" +
-                             std::to_string(::getpid()) + "-" + std::to_string(k));
-      if (fs::create_directory(t, ec)) {
-        stage_ = t;
-        return;
-      }
-    }
-    throw Error("cannot create a temporary directory in '" + parent.string() + "'");
-  }
-  StagedOutput(const StagedOutput&) = delete;
-  StagedOutput& operator=(const StagedOutput&) = delete;
-  ~StagedOutput() {
-    if (!committed_ && !stage_.empty()) {
-      std::error_code ec;
-      std::filesystem::remove_all(stage_, ec);  // our own temporary directory only
-    }
-  }
-  /// Path of `name` inside the staging directory.
-  std::string path(const std::string& name) const { return (stage_ / name).string(); }
-  std::string staging_dir() const { return stage_.string(); }
-  /// Moves the outputs into --out. @throws Error on failure (staging is then removed).
-  void commit() {
-    namespace fs = std::filesystem;
-    std::error_code ec;
-    if (!existed_) {
-      fs::rename(stage_, out_, ec);
-      if (ec) throw Error("cannot move outputs to '" + out_.string() + "': " + ec.message());
-    } else {
-      for (const auto& e : fs::directory_iterator(stage_)) {
-        const fs::path dst = out_ / e.path().filename();
-        if (fs::is_directory(dst, ec) && e.is_directory()) fs::remove_all(dst, ec);
-        fs::rename(e.path(), dst, ec);
-        if (ec)
-          throw Error("cannot move '" + e.path().string() + "' to '" + dst.string() +
-                      "': " + ec.message());
-      }
-      fs::remove(stage_, ec);
-    }
-    committed_ = true;
-  }
-  const std::filesystem::path& out() const { return out_; }
-
- private:
-  std::filesystem::path out_, stage_;
-  bool existed_ = false;
-  bool committed_ = false;
-};
 
 /// The command line as one string (for report.json).
 inline std::string command_line(int argc, char** argv) {

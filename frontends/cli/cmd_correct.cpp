@@ -241,7 +241,7 @@ int run_correct(int argc, char** argv) {
     std::string why;
     if (!opt.validate(&why)) throw UsageError("invalid correction options: " + why);
   }
-  // Check --out before the work (StagedOutput below re-checks and stages).
+  // Check --out before the work (AtomicOutputDir below re-checks and stages).
   {
     std::error_code ec;
     const std::filesystem::path p(out_dir);
@@ -365,7 +365,7 @@ int run_correct(int argc, char** argv) {
     corr.push_back(c);
   }
 
-  StagedOutput out(out_dir, args.flag("force"));
+  AtomicOutputDir out(out_dir, args.flag("force"));
 
   // ---- wrong anchors: each tested against all the others (correction/screening.hpp) --------
   correction::Corrector corrector(opt);

@@ -353,7 +353,7 @@ int run_experiment(int argc, char** argv) {
     setup.wrong_max_m = w[2];
   }
   const std::string data = args.get("data-dir", "data/kitti");
-  StagedOutput out(args.required("out"), args.flag("force"));
+  AtomicOutputDir out(args.required("out"), args.flag("force"));
 
   int plot_interval = intervals.front();
   for (int n : intervals)
@@ -556,7 +556,7 @@ int run_experiment(int argc, char** argv) {
   {
     std::ofstream f(out.path("RESULTS.md"));
     f << md.str();
-    if (!f) throw Error("cannot write " + out.path("RESULTS.md"));
+    close_checked(f, out.path("RESULTS.md"));
   }
   out.commit();
   std::fputs(md.str().c_str(), stdout);

@@ -134,13 +134,8 @@ int run_build(int argc, char** argv) {
   const std::string in = args.required("geotags");
   const std::string out = args.required("out");
   std::error_code ec;
-  if (fs::exists(out, ec) && !args.flag("force"))
-    throw Error("--out '" + out + "' exists (refusing to overwrite; use --force)");
-  if (fs::is_directory(out, ec)) throw Error("--out '" + out + "' is a directory");
-  const fs::path out_parent = fs::absolute(fs::path(out)).parent_path();
-  if (!fs::is_directory(out_parent, ec))
-    throw Error("--out '" + out + "': parent directory '" + out_parent.string() +
-                "' does not exist");
+  // Checks --out, and stages the database beside it: --out is never a partial file.
+  AtomicOutputDir staged(out, args.flag("force"), AtomicOutputDir::Kind::kFile);
   const bool is_dir = fs::is_directory(in, ec);
   if (!fs::exists(in, ec)) throw Error("--geotags '" + in + "' does not exist");
 
@@ -216,7 +211,8 @@ int run_build(int argc, char** argv) {
                  "warning: every one of the %d visual words occurs in all %zu views, so retrieval "
                  "cannot rank them; rebuild with a larger vocabulary (--branching, --depth)\n",
                  db.vocabulary().num_words(), db.views().size());
-  db.save(out);
+  db.save(staged.path(staged.out().filename().string()));
+  staged.commit();
   const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   int panos = 0;
   for (const auto& s : sources) panos += s.kind == geotag::SourceKind::kPanorama ? 1 : 0;

@@ -110,7 +110,7 @@ int run_render(int argc, char** argv) {
     o.panorama_height = static_cast<int>(v[1]);
   }
 
-  StagedOutput out(out_dir, args.flag("force"));
+  AtomicOutputDir out(out_dir, args.flag("force"));
   const bool tty = stderr_is_tty();
   const auto t0 = std::chrono::steady_clock::now();
   const render::DatasetSummary s =

@@ -358,7 +358,7 @@ int run_run(int argc, char** argv) {
   }
 
   // ---- outputs ------------------------------------------------------------------------------
-  StagedOutput out(out_dir, args.flag("force"));
+  AtomicOutputDir out(out_dir, args.flag("force"));
   const std::string note =
       "M = geodrift VO map frame (first keyframe = origin, arbitrary scale; not geo-referenced)";
   bool geo_written = false;
@@ -417,7 +417,7 @@ int run_run(int argc, char** argv) {
          << c.geotag_id << "," << io::detail::fmt(c.y_w.x()) << "," << io::detail::fmt(c.y_w.y())
          << "," << io::detail::fmt(c.y_w.z()) << "," << c.inliers << ","
          << io::detail::fmt(c.reprojection_rms) << "\n";
-    if (!cs) throw Error("cannot write " + out.path("correspondences.csv"));
+    close_checked(cs, out.path("correspondences.csv"));
     std::ofstream as(out.path("attempts.csv"));
     as << "# geodrift " << kVersion << " every keyframe x retrieved view attempt; x,y,z = the "
        << "view's PnP centre mapped to W through the keyframe's corrected pose (empty without "
@@ -449,7 +449,7 @@ int run_run(int argc, char** argv) {
         if (ch == ',' || ch == '\n') ch = ';';
       as << "," << reason << "\n";
     }
-    if (!as) throw Error("cannot write " + out.path("attempts.csv"));
+    close_checked(as, out.path("attempts.csv"));
     // The uncorrected VO keyframes (M) with their frame index, for a Sim(3)-aligned baseline.
     io::write_trajectory_kitti(out.path("vo_keyframes_kitti.txt"), kf_traj, note, true,
                                io::kMapUnits);

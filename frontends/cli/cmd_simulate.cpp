@@ -102,7 +102,7 @@ int run_simulate(int argc, char** argv) {
   so.first_frame = first;
   so.last_frame = last;
 
-  StagedOutput out(out_dir, args.flag("force"));
+  AtomicOutputDir out(out_dir, args.flag("force"));
   if (stderr_is_tty())
     std::fprintf(stderr, "geodrift simulate: simulating %s [%d, %d) ...\n", seq.c_str(), first,
                  last);

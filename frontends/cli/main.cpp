@@ -71,6 +71,7 @@ void print_usage(std::FILE* f) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  geodrift::cli::install_signal_cleanup();  // SIGINT/SIGTERM remove staged outputs
   if (argc < 2) {
     print_usage(stderr);
     return 2;
@@ -94,7 +95,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "geodrift %s: usage error: %s\n", cmd.c_str(), e.what());
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "geodrift %s: error: %s\n", cmd.c_str(), e.what());
+    std::fprintf(stderr, "geodrift %s: error: %s\n", cmd.c_str(),
+                 geodrift::cli::describe_output_error(e).c_str());
     return 1;
   }
 }
