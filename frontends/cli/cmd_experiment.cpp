@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -171,9 +172,16 @@ std::vector<Eigen::Vector3d> centres(const correction::Corrector& c) {
   return out;
 }
 
+/// Whose turn it is to merge its seed into a SeqResult (guarded by the mutex of run_seed).
+struct MergeTurn {
+  std::condition_variable cv;
+  std::size_t next = 0;  ///< index of the seed to merge next
+};
+
 void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned seed,
               const Setup& setup, const std::vector<int>& intervals, int plot_interval,
-              bool first_seed, SeqResult* res, std::mutex* mu, int* done, int total) {
+              bool first_seed, SeqResult* res, std::mutex* mu, int* done, int total,
+              std::size_t order, MergeTurn* turn) {
   const auto t0 = std::chrono::steady_clock::now();
   const sim::SimulatedSequence s = sim::simulate(seq, sim::SimOptions::kitti(name, seed));
   const double sim_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -253,7 +261,10 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       std::fprintf(stderr, "\r  %d/%d runs (sequence %s, seed %u, interval %d)   ", *done, total,
                    name.c_str(), seed, intervals[ii]);
   }
-  std::lock_guard<std::mutex> lock(*mu);
+  // Merge in seed order, whichever thread finishes first, so that --threads 1 and 2 sum and
+  // list the seeds in the same order (a byte-identical RESULTS.md).
+  std::unique_lock<std::mutex> lock(*mu);
+  turn->cv.wait(lock, [&] { return turn->next == order; });
   for (const auto& [k, v] : local) {
     Cell& c = res->cells[k];
     c.values.insert(c.values.end(), v.values.begin(), v.values.end());
@@ -279,6 +290,8 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
     res->points = static_cast<int>(s.map.points.size());
     res->correspondences_100 = corr100;
   }
+  ++turn->next;
+  turn->cv.notify_all();
 }
 
 std::vector<Eigen::Vector2d> xy(const std::vector<Eigen::Vector3d>& p) {
@@ -369,11 +382,13 @@ int run_experiment(int argc, char** argv) {
     const sim::KittiSequence seq = sim::load_kitti_sequence(data + "/poses/" + name + ".txt", calib,
                                                             data + "/times/" + name + ".txt");
     SeqResult& res = results[name];
+    MergeTurn turn;
     for (std::size_t k = 0; k < seeds.size(); k += threads) {
       std::vector<std::thread> pool;
       for (int t = 0; t < threads && k + t < seeds.size(); ++t)
         pool.emplace_back(run_seed, std::cref(seq), std::cref(name), seeds[k + t], std::cref(setup),
-                          std::cref(intervals), plot_interval, k + t == 0, &res, &mu, &done, total);
+                          std::cref(intervals), plot_interval, k + t == 0, &res, &mu, &done, total,
+                          k + t, &turn);
       for (auto& th : pool) th.join();
     }
   }

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -176,4 +177,74 @@ TEST_CASE("an unwritable --out or a failed write is a clear error that loses not
     CHECK(snapshot(t.file("out")) == before);
     CHECK(staging_folders(t.path()).empty());
   }
+}
+
+namespace {
+
+/// `files` with the wall-clock fields blanked, the only parts of geodrift's outputs that may
+/// differ between runs on the same inputs (docs/building.md, "Atomic outputs and
+/// determinism"): in report.json every number of a key containing "seconds" and the
+/// command line (it names --out and --threads); in RESULTS.md the "Runtime:" and "Correction
+/// time per seed" lines and the command line.
+std::map<std::string, std::string> without_timings(std::map<std::string, std::string> files) {
+  const std::regex seconds(R"(("[a-z_]*seconds[a-z_]*": )(-?[0-9][0-9.eE+-]*|null|nan))");
+  const std::regex command(R"("command_line": "[^"\n]*")");
+  const std::regex timing_lines(
+      R"((^|\n)(Runtime:|Correction time per seed|    geodrift experiment)[^\n]*)");
+  for (auto& [name, text] : files) {
+    if (name.find("report.json") != std::string::npos) {
+      text = std::regex_replace(text, seconds, "$1T");
+      text = std::regex_replace(text, command, "\"command_line\": C");
+    }
+    if (name == "RESULTS.md") text = std::regex_replace(text, timing_lines, "$1T");
+  }
+  return files;
+}
+
+}  // namespace
+
+TEST_CASE("simulate, correct and experiment give identical outputs on identical inputs", "[cli]") {
+  geodrift::test::TempDir t;
+  const auto run_ok = [&](const std::vector<std::string>& args) {
+    std::string log;
+    const int code = run_to_end(t, args, &log);
+    INFO(log);
+    REQUIRE(code == 0);
+  };
+  // simulate has no --threads: two runs, byte-identical (no timings in its files).
+  run_ok(simulate_args(3, t.file("sim"), false, "0:1000"));
+  run_ok(simulate_args(3, t.file("sim2"), false, "0:1000"));
+  const auto sim = snapshot(t.file("sim"));
+  REQUIRE(sim.size() == 7);
+  CHECK(sim == snapshot(t.file("sim2")));
+
+  // correct has no --threads: two runs with the same command line (the second after the
+  // first's output is moved away), identical but for report.json's timings.
+  const std::vector<std::string> correct{"correct",
+                                         "--trajectory",
+                                         t.file("sim/trajectory_kitti.txt"),
+                                         "--map",
+                                         t.file("sim/colmap"),
+                                         "--anchors",
+                                         t.file("sim/anchors.csv"),
+                                         "--out",
+                                         t.file("corr")};
+  run_ok(correct);
+  fs::rename(t.file("corr"), t.file("corr1"));
+  run_ok(correct);
+  const auto c1 = snapshot(t.file("corr1")), c2 = snapshot(t.file("corr"));
+  REQUIRE(c1.count("report.json"));
+  CHECK(without_timings(c1) == without_timings(c2));
+  for (const auto& [name, text] : c1)
+    if (name != "report.json") CHECK(text == c2.at(name));
+
+  // experiment: --threads 1 and 2 (seeds in parallel) give the same tables and figures.
+  const auto experiment = [&](const std::string& threads, const std::string& out) {
+    run_ok({"experiment", "--sequences", "02", "--intervals", "300", "--seeds", "1,2", "--methods",
+            "init,ours", "--data-dir", kData, "--threads", threads, "--out", t.file(out)});
+    return snapshot(t.file(out));
+  };
+  const auto e1 = experiment("1", "exp1"), e2 = experiment("2", "exp2");
+  REQUIRE(e1.count("RESULTS.md"));
+  CHECK(without_timings(e1) == without_timings(e2));
 }
