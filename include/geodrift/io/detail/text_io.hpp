@@ -90,6 +90,13 @@ inline std::vector<std::string> split_csv(const std::string& s) {
   return out;
 }
 
+/// A field's text as quoted in an error message: at most 40 characters, longer ones cut with
+/// their length given, so a corrupt multi-megabyte token does not flood the terminal.
+inline std::string quote_field(const std::string& s) {
+  if (s.size() <= 40) return "'" + s + "'";
+  return "'" + s.substr(0, 32) + "...' (" + std::to_string(s.size()) + " characters)";
+}
+
 /// Parses a finite double; `field` names it in the error.
 /// @throws InvalidArgument "<path>:<line>: <field> '<text>' is not a number" or "... is not
 ///         finite" for nan/inf.
@@ -101,9 +108,9 @@ inline double parse_double(const std::string& text, const std::string& path, int
   errno = 0;
   const double v = std::strtod(s.c_str(), &end);
   if (end == s.c_str() || *end != '\0') {
-    parse_error(path, line, field + " '" + s + "' is not a number");
+    parse_error(path, line, field + " " + quote_field(s) + " is not a number");
   }
-  if (!std::isfinite(v)) parse_error(path, line, field + " '" + s + "' is not finite");
+  if (!std::isfinite(v)) parse_error(path, line, field + " " + quote_field(s) + " is not finite");
   return v;
 }
 
@@ -117,7 +124,7 @@ inline long long parse_int(const std::string& text, const std::string& path, int
   errno = 0;
   const long long v = std::strtoll(s.c_str(), &end, 10);
   if (end == s.c_str() || *end != '\0' || errno == ERANGE) {
-    parse_error(path, line, field + " '" + s + "' is not an integer");
+    parse_error(path, line, field + " " + quote_field(s) + " is not an integer");
   }
   if (v < lo || v > hi) {
     std::ostringstream os;
@@ -127,17 +134,33 @@ inline long long parse_int(const std::string& text, const std::string& path, int
   return v;
 }
 
+/// Longest line LineReader accepts (64 MiB). geodrift's text formats have short lines except
+/// COLMAP's images.txt, whose POINTS2D line holds ~30 bytes per keypoint (64 MiB is two million
+/// keypoints in one image); a longer line is a binary or corrupt file, refused before it is
+/// split into fields.
+inline constexpr std::size_t kMaxLineBytes = std::size_t{64} << 20;
+
 /// Line-by-line reader that knows the 1-based number of the line just read.
 class LineReader {
  public:
   explicit LineReader(const std::string& path) : path_(path), in_(open_for_reading(path)) {}
   /// Reads the next line (without its newline and trailing CR). Returns false at end of file.
+  /// @throws InvalidArgument "<path>:<line>: ..." for a line longer than kMaxLineBytes.
   bool next(std::string* line) {
     if (!std::getline(in_, *line)) {
       if (in_.bad()) throw Error("error while reading '" + path_ + "'");
       return false;
     }
     ++line_;
+    if (line->size() > kMaxLineBytes) {
+      const std::size_t n = line->size();
+      line->clear();
+      line->shrink_to_fit();
+      parse_error(path_, line_,
+                  "line of " + std::to_string(n) + " bytes, longer than the " +
+                      std::to_string(kMaxLineBytes >> 20) +
+                      " MiB limit (a binary or corrupt file?)");
+    }
     if (!line->empty() && line->back() == '\r') line->pop_back();
     return true;
   }
