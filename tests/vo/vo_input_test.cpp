@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
@@ -77,6 +78,106 @@ TEST_CASE("Calibration files: KITTI P0, K/D text, OpenCV YAML, and clear errors"
   test::write_text(t.file("short.txt"), "P0: 1 2 3\n");
   CHECK_THAT(error_of([&] { vo::load_calibration(t.file("short.txt")); }),
              Catch::Contains("expected 12"));
+}
+
+TEST_CASE("Calibration YAML: OpenCV, ROS camera_info, lists, ORB-SLAM2/3, and clear errors",
+          "[vo]") {
+  test::TempDir t;
+  const auto load = [&](const std::string& name, const std::string& text) {
+    test::write_text(t.file(name), text);
+    return vo::load_calibration(t.file(name));
+  };
+  // OpenCV's block form with a data list over two lines and comments.
+  vo::Calibration c = load("cv.yaml",
+                           "%YAML:1.0\n---\n# calibrated 2026\ncamera_matrix: !!opencv-matrix\n"
+                           "   rows: 3\n   cols: 3\n   dt: d\n   data: [ 7.1e+02, 0., 6.0e+02,\n"
+                           "       0., 7.2e+02, 1.8e+02, 0., 0., 1. ]  # row-major\n"
+                           "distortion_coefficients: !!opencv-matrix\n   rows: 5\n   cols: 1\n"
+                           "   dt: d\n   data: [ -0.3, 0.1, 0.001, -0.002, 0. ]\n"
+                           "image_width: 1241\nimage_height: 376\n");
+  CHECK(c.camera.fx == 710.0);
+  CHECK(c.camera.fy == 720.0);
+  CHECK(c.camera.cx == 600.0);
+  CHECK(c.camera.cy == 180.0);
+  CHECK(c.camera.width == 1241);
+  CHECK(c.camera.height == 376);
+  REQUIRE(c.distortion.size() == 5);
+  CHECK(c.distortion[3] == -0.002);
+
+  // ROS camera_info: no tag, no %YAML header.
+  c = load("ros.yaml",
+           "image_width: 640\nimage_height: 480\ncamera_name: narrow_stereo\ncamera_matrix:\n"
+           "  rows: 3\n  cols: 3\n  data: [500, 0, 320, 0, 505, 240, 0, 0, 1]\n"
+           "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n"
+           "  data: [0.1, -0.2, 0, 0, 0]\nprojection_matrix:\n  rows: 3\n  cols: 4\n"
+           "  data: [500, 0, 320, 0, 0, 505, 240, 0, 0, 0, 1, 0]\n");
+  CHECK(c.camera.fy == 505.0);
+  CHECK(c.camera.width == 640);
+  CHECK(c.distortion.size() == 5);
+
+  // Plain lists.
+  c = load("list.yml", "K: [400, 0, 300, 0, 401, 200, 0, 0, 1]\nD: [0.01, 0, 0, 0]\n");
+  CHECK(c.camera.fy == 401.0);
+  CHECK(c.distortion.size() == 4);
+
+  // ORB-SLAM2 and ORB-SLAM3 settings (other keys, nested blocks and matrices are skipped).
+  c = load("orb2.yaml",
+           "%YAML:1.0\nCamera.fx: 718.856\nCamera.fy: 718.856\nCamera.cx: 607.1928\n"
+           "Camera.cy: 185.2157\nCamera.k1: 0.0\nCamera.k2: 0.0\nCamera.p1: 0.0\n"
+           "Camera.p2: 0.0\nCamera.width: 1241\nCamera.height: 376\nCamera.fps: 10.0\n"
+           "ORBextractor.nFeatures: 2000\nViewer.KeyFrameSize: 0.1\n");
+  CHECK(c.camera.cx == 607.1928);
+  CHECK(c.camera.width == 1241);
+  CHECK(c.distortion.size() == 4);
+  c = load("orb3.yaml",
+           "%YAML:1.0\nFile.version: \"1.0\"\nCamera.type: \"PinHole\"\n"
+           "Camera1.fx: 458.654\nCamera1.fy: 457.296\nCamera1.cx: 367.215\n"
+           "Camera1.cy: 248.375\nCamera1.k1: -0.28340811\nCamera1.k2: 0.07395907\n"
+           "Camera1.p1: 0.00019359\nCamera1.p2: 1.76187114e-05\nCamera.width: 752\n"
+           "Camera.height: 480\nIMU.T_b_c1: !!opencv-matrix\n   rows: 4\n   cols: 4\n"
+           "   dt: f\n   data: [0.0148655429818, -0.999880929698, 0.00414029679422,\n"
+           "         -0.0216401454975, 0.999557249008, 0.0149672133247,\n"
+           "         0.025715529948, -0.0257744366974, 0.00375618835797, 0.999660727178,\n"
+           "         0.00981073058949, 0.0, 0.0, 0.0, 1.0]\n");
+  CHECK(c.camera.fy == 457.296);
+  CHECK(c.camera.height == 480);
+  CHECK(c.distortion.size() == 4);
+
+  const auto error = [&](const std::string& name, const std::string& text) {
+    return error_of([&] { load(name, text); });
+  };
+  CHECK_THAT(error("fish.yaml",
+                   "Camera.type: \"KannalaBrandt8\"\nCamera1.fx: 1\n"
+                   "Camera1.fy: 1\nCamera1.cx: 1\nCamera1.cy: 1\n"),
+             Catch::Contains("fish.yaml:1: Camera.type 'KannalaBrandt8' is not supported"));
+  CHECK_THAT(error("part.yaml", "Camera.fx: 500\nCamera.fy: 500\n"),
+             Catch::Contains("part.yaml: Camera.fx is given but not all of Camera.fy, cx, cy"));
+  CHECK_THAT(error("open.yaml", "K: [500, 0, 320,\n 0, 500, 240,\n"),
+             Catch::Contains("open.yaml:1: 'K': the list opened with '[' is never closed"));
+  CHECK_THAT(error("nan.yaml", "K: [500, 0, 320, 0, x500, 240, 0, 0, 1]\n"),
+             Catch::Contains("nan.yaml:1: 'K' item 'x500' is not a number"));
+  CHECK_THAT(error("nine.yaml", "K: [500, 0, 320, 0, 500, 240]\n"),
+             Catch::Contains("nine.yaml:1: 'K' lists 6 numbers, expected 9"));
+  CHECK_THAT(error("count.yaml", "K: !!opencv-matrix\n  rows: 3\n  cols: 3\n  data: [1, 2]\n"),
+             Catch::Contains("count.yaml:4: 'K' data lists 2 numbers, rows x cols is 3x3"));
+  CHECK_THAT(error("twice.yaml", "K: [1, 0, 1, 0, 1, 1, 0, 0, 1]\ncamera_matrix: [1]\n"),
+             Catch::Contains("twice.yaml:2: 'camera_matrix' repeats 'K' of line 1"));
+  CHECK_THAT(error("dmat.yaml",
+                   "K: [1, 0, 1, 0, 1, 1, 0, 0, 1]\nD: !!opencv-matrix\n  rows: 2\n"
+                   "  cols: 2\n  data: [0, 0, 0, 0]\n"),
+             Catch::Contains("dmat.yaml:2: distortion 'D' is 2x2, expected one row or one column"));
+  CHECK_THAT(error("inf.yaml", "K: [inf, 0, 1, 0, 1, 1, 0, 0, 1]\n"),
+             Catch::Contains("are not finite and positive"));
+  CHECK_THAT(error("none.yaml", "%YAML:1.0\nfoo: 1\nbar:\n  - 1\n"),
+             Catch::Contains("has no 'P0:' line"));
+  // A calibration file is small; a large file is refused before it is read.
+  {
+    std::ofstream big(t.file("big.yaml"), std::ios::binary);
+    big.seekp((std::streamoff{17} << 20) - 1);
+    big.put('\n');
+  }
+  CHECK_THAT(error_of([&] { vo::load_calibration(t.file("big.yaml")); }),
+             Catch::Contains("a calibration file is at most 16 MiB"));
 }
 
 TEST_CASE("Frame sources: KITTI folder order and times, unreadable video", "[vo]") {

@@ -14,6 +14,7 @@
 #include <sstream>
 #include <utility>
 
+#include "calibration_yaml.hpp"
 #include "geodrift/error.hpp"
 
 namespace fs = std::filesystem;
@@ -29,8 +30,10 @@ std::vector<double> numbers_after(const std::string& line, std::size_t pos) {
   return v;
 }
 
-/// Largest image width or height a calibration file may state (pixels).
-constexpr int kMaxImageSide = 1 << 20;
+constexpr int kMaxImageSide = detail::kMaxCalibrationImageSide;
+
+/// Calibration files are a few kilobytes; anything larger is not one (and is not read whole).
+constexpr std::uintmax_t kMaxCalibrationBytes = 16u << 20;
 
 bool read_text_calibration(const std::string& path, Calibration* c) {
   std::ifstream in(path);
@@ -70,7 +73,9 @@ bool read_text_calibration(const std::string& path, Calibration* c) {
   return have_k;
 }
 
-bool read_yaml_calibration(const std::string& path, Calibration* c) {
+/// OpenCV FileStorage XML (`<opencv_storage>`). YAML never reaches OpenCV's parser, which can
+/// loop forever on malformed YAML (docs/fuzzing.md); geodrift reads YAML itself.
+bool read_xml_calibration(const std::string& path, Calibration* c) {
   cv::FileStorage fs;
   // Not a FileStorage file: no calibration found here (load_calibration says so). OpenCV's
   // parser throws cv::Exception for most malformed files but std::length_error for some (an
@@ -139,6 +144,18 @@ bool read_yaml_calibration(const std::string& path, Calibration* c) {
     *out = static_cast<int>(v);
   }
   return true;
+}
+
+/// YAML (read by calibration_yaml.cpp) or, when the first character is '<', OpenCV XML.
+bool read_yaml_calibration(const std::string& path, Calibration* c) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("cannot read calibration file '" + path + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  const std::string s = text.str();
+  const auto first = s.find_first_not_of(" \t\r\n");
+  if (first != std::string::npos && s[first] == '<') return read_xml_calibration(path, c);
+  return detail::parse_calibration_yaml(s, path, c);
 }
 
 bool is_image(const fs::path& p) {
@@ -251,14 +268,22 @@ class VideoSource final : public FrameSource {
 
 Calibration load_calibration(const std::string& path) {
   if (!fs::is_regular_file(path)) throw Error("calibration file '" + path + "' does not exist");
+  std::error_code ec;
+  const std::uintmax_t bytes = fs::file_size(path, ec);
+  GEODRIFT_CHECK(!ec && bytes <= kMaxCalibrationBytes,
+                 "calibration file '" << path << "' is " << bytes
+                                      << " bytes; a calibration file is at most "
+                                      << (kMaxCalibrationBytes >> 20) << " MiB");
   Calibration c;
   c.source = path;
   std::string ext = fs::path(path).extension().string();
   const bool yaml_ext = ext == ".yaml" || ext == ".yml" || ext == ".xml";
   bool ok = yaml_ext ? read_yaml_calibration(path, &c) : read_text_calibration(path, &c);
   if (!ok && !yaml_ext) ok = read_yaml_calibration(path, &c);
-  GEODRIFT_CHECK(
-      ok, "calibration file '" << path << "' has no 'P0:' line, 'K:' line or OpenCV camera_matrix");
+  GEODRIFT_CHECK(ok, "calibration file '"
+                         << path
+                         << "' has no 'P0:' line, 'K:' line, OpenCV/ROS camera_matrix or "
+                            "ORB-SLAM Camera.fx");
   GEODRIFT_CHECK(std::isfinite(c.camera.fx) && c.camera.fx > 0 && std::isfinite(c.camera.fy) &&
                      c.camera.fy > 0 && std::isfinite(c.camera.cx) && std::isfinite(c.camera.cy),
                  path << ": intrinsics fx " << c.camera.fx << " fy " << c.camera.fy << " cx "

@@ -34,8 +34,12 @@ struct Calibration {
 ///    fx = p00, cx = p02, fy = p11, cy = p12 (no distortion).
 ///  - plain text with `K: fx 0 cx 0 fy cy 0 0 1` (9 numbers), optional `D: k1 k2 p1 p2 [k3]`
 ///    and `size: width height`.
-///  - OpenCV FileStorage YAML/XML with `camera_matrix` or `K` (3x3), optional
-///    `distortion_coefficients` or `D`, `image_width`, `image_height`.
+///  - YAML with `camera_matrix` or `K` (3x3) as an OpenCV `!!opencv-matrix`, a ROS
+///    camera_info rows/cols/data block or a 9-number list, optional `distortion_coefficients`
+///    or `D`, `image_width`, `image_height`; or an ORB-SLAM2/3 settings file (`Camera.fx` /
+///    `Camera1.fx`, fy, cx, cy, k1, k2, p1, p2, k3, `Camera.width`, `Camera.height`). geodrift
+///    parses YAML itself (OpenCV 4.6's YAML parser can hang on malformed files).
+///  - OpenCV FileStorage XML with the same keys as the OpenCV YAML.
 /// @throws Error when the file is missing/unreadable, InvalidArgument when no calibration is
 ///         found in it or the intrinsics are not finite and positive.
 Calibration load_calibration(const std::string& path);
