@@ -9,6 +9,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
+#include <regex>
 
 #include "corridor.hpp"
 #include "geodrift/error.hpp"
@@ -356,5 +357,28 @@ TEST_CASE("geodrift run on an image folder writes the reconstruction, keyframes 
   // A second run into the same folder is refused: nothing the user has is overwritten.
   const Run again = run("run --images " + t.file("drive") + " --out " + t.file("out"));
   CHECK(again.code != 0);
+
+  // Determinism: the same frames with --threads 2 (local BA on two threads) give byte-identical
+  // files; report.json differs only in its command line, the threads parameter and timings.
+  const Run two = run("run --images " + t.file("drive") + " --threads 2 --out " + t.file("out2"));
+  INFO(two.output);
+  REQUIRE(two.code == 0);
+  std::size_t compared = 0;
+  for (const auto& e : fs::recursive_directory_iterator(t.path() / "out")) {
+    if (!e.is_regular_file()) continue;
+    const fs::path rel = fs::relative(e.path(), t.path() / "out");
+    std::string a = test::read_text(e.path().string());
+    std::string b = test::read_text((t.path() / "out2" / rel).string());
+    if (rel == "report.json") {
+      const std::regex varying(R"(("command_line": "[^"\n]*")|("threads": [0-9]+)|)"
+                               R"(("timings_s": \{[^}]*\}))");
+      a = std::regex_replace(a, varying, "V");
+      b = std::regex_replace(b, varying, "V");
+    }
+    INFO(rel.string());
+    CHECK(a == b);
+    ++compared;
+  }
+  CHECK(compared == 8);
 }
 #endif

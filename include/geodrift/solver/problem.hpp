@@ -233,7 +233,7 @@ class ResidualContainerBase {
   virtual void block_range(int k, const std::vector<ParameterBlock>& pbs, int* lo,
                            int* hi) const = 0;
   /// Per-thread work lists (Problem::finalize): [0] thread 0, [1] thread 1, [2] shared (run
-  /// after both, on the calling thread). With one thread, [0] holds every block.
+  /// after both, on the calling thread). The same lists serve 1 and 2 threads.
   std::vector<int> part[3];
   /// Writes the weighted, corrected residual and Jacobian rows of block k (tests).
   virtual bool jacobian(int k, int row, std::vector<Eigen::Triplet<double>>* triplets,
@@ -670,16 +670,18 @@ class Problem {
     ++generation_;
   }
 
-  /// Threads used by linearize() and evaluate_cost(): 1 or 2. With 2, residual blocks whose
-  /// H blocks all lie in the first (second) half of the block columns run on the calling
-  /// (background) thread; the few that straddle the split run afterwards on the calling thread.
+  /// Threads used by linearize() and evaluate_cost(): 1 or 2. Residual blocks whose H blocks
+  /// all lie in the first (second) half of the block columns form list 0 (1); the few that
+  /// straddle the split form list 2. With 2 threads lists 0 and 1 run at once (calling and
+  /// background thread), with 1 one after the other; list 2 runs last on the calling thread.
+  /// Every sum (H, g, cost) is therefore taken in the same order with 1 and 2 threads, and the
+  /// results are bit-identical.
   /// @throws InvalidArgument unless n is 1 or 2.
   void set_num_threads(int n) {
     GEODRIFT_CHECK(n == 1 || n == 2, "num_threads " << n << " not 1 or 2");
     if (n == num_threads_) return;
     num_threads_ = n;
     worker_ = n == 2 ? std::make_unique<detail::Worker>() : nullptr;
-    if (finalized_) partition();
   }
   int num_threads() const { return num_threads_; }
 
@@ -864,8 +866,7 @@ class Problem {
     accel_step_.resize(static_cast<std::size_t>(n));
     for (int c = 0; c < n; ++c) accel_step_[static_cast<std::size_t>(c)] = h * v[c];
     std::fill(rhs, rhs + n, 0.0);
-    const bool two = num_threads_ == 2 && worker_;
-    if (two) accel_buffer_.assign(static_cast<std::size_t>(n), 0.0);
+    accel_buffer_.assign(static_cast<std::size_t>(n), 0.0);  // list 1's half (see for_parts)
     save_state();
     plus(accel_step_.data());
     PartFailure fail;
@@ -874,11 +875,10 @@ class Problem {
                int* failed) {
           return c.acceleration(l.data(), static_cast<int>(l.size()), v, h, out, failed);
         },
-        rhs, two ? accel_buffer_.data() : nullptr, &fail);
+        rhs, accel_buffer_.data(), &fail);
     restore_state();
     if (!ok) return false;
-    if (two)
-      for (int c = 0; c < n; ++c) rhs[c] += accel_buffer_[static_cast<std::size_t>(c)];
+    for (int c = 0; c < n; ++c) rhs[c] += accel_buffer_[static_cast<std::size_t>(c)];
     return true;
   }
 
@@ -947,18 +947,16 @@ class Problem {
     return it->second;
   }
 
-  /// Work lists per thread (see set_num_threads): split at the block column m where half of
-  /// the residual blocks have all their H blocks left of m.
+  /// Work lists (see set_num_threads), the same for 1 and 2 threads: split at the block column
+  /// m where half of the residual blocks have all their H blocks left of m.
   void partition() {
     std::vector<int> his;
     int lo, hi;
-    if (num_threads_ == 2) {
-      for (const auto& c : containers_)
-        for (int k = 0; k < c->size(); ++k) {
-          c->block_range(k, params_, &lo, &hi);
-          his.push_back(hi);
-        }
-    }
+    for (const auto& c : containers_)
+      for (int k = 0; k < c->size(); ++k) {
+        c->block_range(k, params_, &lo, &hi);
+        his.push_back(hi);
+      }
     int m = 0;
     if (!his.empty()) {
       std::nth_element(his.begin(), his.begin() + his.size() / 2, his.end());
@@ -967,10 +965,6 @@ class Problem {
     for (auto& c : containers_) {
       for (auto& l : c->part) l.clear();
       for (int k = 0; k < c->size(); ++k) {
-        if (num_threads_ != 2) {
-          c->part[0].push_back(k);
-          continue;
-        }
         c->block_range(k, params_, &lo, &hi);
         if (hi < 0) {  // all parameters constant: cost only, no H or g entries
           c->part[0].push_back(k);
@@ -1002,10 +996,12 @@ class Problem {
 
   /// The threading of linearize(), evaluate_cost() and acceleration_rhs() (see
   /// set_num_threads): f(container, work list, ctx, &failed_block) over every container's
-  /// list 0 on the calling thread with ctx0 and, with 2 threads, list 1 on the worker with ctx1
-  /// meanwhile; then list 2 (blocks straddling the split) on the calling thread with ctx0.
-  /// Each thread stops at its first false; list 2 runs only if nothing failed. @return false
-  /// with *fail = the calling thread's failure, else the worker's.
+  /// list 0 on the calling thread with ctx0 and list 1 with ctx1 (with 2 threads on the worker
+  /// meanwhile, with 1 afterwards on the calling thread); then list 2 (blocks straddling the
+  /// split) on the calling thread with ctx0. Lists 0 and 1 touch disjoint H blocks and g
+  /// entries, so each sum is taken in the same order either way. Each list stops at its first
+  /// false; list 2 runs only if nothing failed. @return false with *fail = list 0's failure,
+  /// else list 1's.
   template <typename F, typename Ctx>
   bool for_parts(F f, Ctx* ctx0, Ctx* ctx1, PartFailure* fail) const {
     struct Job {
@@ -1025,7 +1021,10 @@ class Problem {
           &job);
     }
     bool ok = run_list(*this, f, 0, ctx0, fail);
-    if (two) worker_->wait();
+    if (two)
+      worker_->wait();
+    else if (ok)
+      run_list(*this, f, 1, ctx1, &job.fail);
     if (ok && job.fail.container >= 0) {
       *fail = job.fail;
       ok = false;
