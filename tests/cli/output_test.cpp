@@ -247,4 +247,6 @@ TEST_CASE("simulate, correct and experiment give identical outputs on identical 
   const auto e1 = experiment("1", "exp1"), e2 = experiment("2", "exp2");
   REQUIRE(e1.count("RESULTS.md"));
   CHECK(without_timings(e1) == without_timings(e2));
+  // The correction-time line ends its paragraph even when --methods leaves out the last method.
+  CHECK(e1.at("RESULTS.md").find(" (by interval)\n\nSimulated drift") != std::string::npos);
 }

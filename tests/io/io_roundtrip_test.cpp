@@ -1,10 +1,14 @@
 // Round trips of every io/ format, plus known-answer checks of each format's conventions.
 
+#include <sys/resource.h>
+
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
 #include <cctype>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
+#include <cstring>
 #include <random>
 #include <set>
 #include <string>
@@ -545,6 +549,27 @@ TEST_CASE("Writers replace files atomically and never leave partial files", "[io
   const std::string bad = dir.file("no/such/dir/out.txt");
   geodrift::test::require_io_error(
       [&] { io::detail::write_atomically(bad, [](std::ostream& os) { os << "x"; }); }, bad);
+
+  // A write that fails half way (here past RLIMIT_FSIZE, EFBIG, as a full disk would give
+  // ENOSPC) names the cause, keeps the old file and leaves no temporary file.
+  struct rlimit old_limit {};
+  REQUIRE(::getrlimit(RLIMIT_FSIZE, &old_limit) == 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+  struct rlimit small = old_limit;
+  small.rlim_cur = 4096;
+  REQUIRE(::setrlimit(RLIMIT_FSIZE, &small) == 0);
+  std::string what;
+  try {
+    io::detail::write_atomically(
+        path, [](std::ostream& os) { os << std::string(std::size_t{1} << 20, 'x'); });
+  } catch (const geodrift::Error& e) {
+    what = e.what();
+  }
+  ::setrlimit(RLIMIT_FSIZE, &old_limit);
+  std::signal(SIGXFSZ, old_handler);
+  CHECK(what == "cannot write '" + path + "': I/O error: " + std::strerror(EFBIG));
+  CHECK(read_text(path) == "new\n");
+  CHECK(dir.num_entries() == 1);
 }
 
 TEST_CASE("KITTI files with a leading time column read as timestamps", "[io][trajectory]") {

@@ -19,6 +19,9 @@ namespace geodrift::geotag {
 
 namespace {
 
+/// Width exactly twice the height (an equirectangular panorama), without int overflow.
+bool is_two_to_one(int w, int h) { return static_cast<long long>(w) == 2LL * h; }
+
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
@@ -238,9 +241,9 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
       else
         fail(csv_path, lineno, "kind '" + f[c_kind] + "' is neither panorama nor photo");
     } else {
-      s.kind = (w == 2 * h) ? SourceKind::kPanorama : SourceKind::kPhoto;
+      s.kind = is_two_to_one(w, h) ? SourceKind::kPanorama : SourceKind::kPhoto;
     }
-    if (s.kind == SourceKind::kPanorama && w != 2 * h)
+    if (s.kind == SourceKind::kPanorama && !is_two_to_one(w, h))
       fail(csv_path, lineno,
            "panorama '" + s.path + "' is " + std::to_string(w) + "x" + std::to_string(h) +
                ", not 2:1 equirectangular");
@@ -344,7 +347,7 @@ std::vector<GeoSource> read_geotag_jpeg_folder(const std::string& dir,
     s.tag.height = x.altitude_m;
     if (std::isfinite(x.true_heading_deg)) s.tag.heading = x.true_heading_deg * kDeg;
     s.path = path;
-    s.kind = (w == 2 * h) ? SourceKind::kPanorama : SourceKind::kPhoto;
+    s.kind = is_two_to_one(w, h) ? SourceKind::kPanorama : SourceKind::kPhoto;
     if (s.kind == SourceKind::kPanorama) {
       if (!std::isfinite(s.tag.heading)) {
         skip(std::string("2:1 panorama without an EXIF true GPSImgDirection") +

@@ -199,6 +199,7 @@ inline void write_atomically(const std::string& path,
                     "': " + std::strerror(errno));
       }
       out.exceptions(std::ios::failbit | std::ios::badbit);
+      errno = 0;  // a failed write below leaves its cause here (ENOSPC, EFBIG, EIO, ...)
       write(out);
       out.flush();
       out.close();
@@ -206,8 +207,10 @@ inline void write_atomically(const std::string& path,
     fs::rename(tmp, target, ec);
     if (ec) throw Error("cannot write '" + path + "': rename failed: " + ec.message());
   } catch (const std::ios_base::failure& e) {
+    const int err = errno;
     fs::remove(tmp, ec);
-    throw Error("cannot write '" + path + "': I/O error: " + e.what());
+    throw Error("cannot write '" + path + "': I/O error: " +
+                (err != 0 ? std::string(std::strerror(err)) : std::string(e.what())));
   } catch (...) {
     fs::remove(tmp, ec);
     throw;
