@@ -25,6 +25,7 @@
 #include <sstream>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -168,6 +169,13 @@ struct CorrectorOptions {
   /// (1 = only its predecessor). A trajectory without a map (`geodrift correct` without --map)
   /// has no covisibility; linking the next few keyframes stands in for it.
   int consecutive_links = 1;
+  /// A map point adds to the covisibility counts (min_shared_points) of the keyframe pairs among
+  /// its first this-many observers only. A point seen by far more keyframes is a distant
+  /// landmark (a tower, a mountain) that ties no two keyframes' relative pose, and counting
+  /// every pair of its observers costs their number squared: 5e9 map updates for one point
+  /// seen by 100,000 keyframes (BENCHMARKS.md "Limits"). Real tracks are far shorter (a few
+  /// to ~100 keyframes), so the default changes nothing for them.
+  int covisibility_max_track = 1000;
   /// Weight each geo term (PGO e3 edge, BA geo term) by how well its view is localized in the
   /// map as well as by its geo-tag's standard deviation. A view localized by PnP + LM carries
   /// its pose covariance (Correspondence::pose_cov); with
@@ -301,6 +309,7 @@ struct CorrectorOptions {
       if (!(std::isfinite(l) && l > 0)) return fail("PGO weights lambda1..3 must be finite, > 0");
     if (min_shared_points < 1) return fail("min_shared_points must be >= 1");
     if (consecutive_links < 1) return fail("consecutive_links must be >= 1");
+    if (covisibility_max_track < 2) return fail("covisibility_max_track must be >= 2");
     if (!(max_window_rescale > 1) || std::isnan(max_window_rescale))
       return fail("max_window_rescale must be > 1");
     if (!(ba_huber_px > 0 && std::isfinite(ba_huber_px)))
@@ -366,6 +375,33 @@ struct StepReport {
   std::string linear_solver;       ///< the solver's name for the linear solver it used
   std::vector<double> cost_trace;  ///< cost at the start, then after each LM iteration
 };
+
+namespace detail {
+
+/// Cosine of the widest angle between two of the unit vectors `rays`, or any value <= `stop`
+/// once a pair that wide is found. Exact for up to 256 rays (pairwise). Beyond that (a point
+/// seen by thousands of keyframes) it is the widest angle between the first ray, the ray
+/// farthest from it, and every ray: at least half the widest angle, in linear time.
+inline double widest_ray_cos(const std::vector<Eigen::Vector3d>& rays, double stop) {
+  double min_cos = 1.0;
+  if (rays.size() <= 256) {
+    for (std::size_t i = 0; i < rays.size() && min_cos > stop; ++i)
+      for (std::size_t j = 0; j < i; ++j) min_cos = std::min(min_cos, rays[i].dot(rays[j]));
+    return min_cos;
+  }
+  std::size_t far = 0;
+  for (std::size_t i = 1; i < rays.size(); ++i) {
+    const double c = rays[0].dot(rays[i]);
+    if (c < min_cos) {
+      min_cos = c;
+      far = i;
+    }
+  }
+  for (const auto& r : rays) min_cos = std::min(min_cos, rays[far].dot(r));
+  return min_cos;
+}
+
+}  // namespace detail
 
 /// The Corrector (DESIGN.md "who owns what"). It receives keyframes, points, observations and
 /// correspondences in the front end's map frame M (raw, never rewritten), keeps its own copy,
@@ -439,9 +475,19 @@ class Corrector {
     GEODRIFT_CHECK(o.pixel.allFinite(), "observation (keyframe " << o.keyframe << ", point "
                                                                  << o.point << ") not finite");
     auto& obs = observers_[p->second];
-    for (const auto& [ki, oi] : obs) {
-      if (ki == k->second) return;  // a point is observed once per keyframe
-      ++shared_[{std::min(ki, k->second), std::max(ki, k->second)}];
+    const std::size_t cap = static_cast<std::size_t>(options_.covisibility_max_track);
+    if (obs.size() < cap) {
+      for (const auto& [ki, oi] : obs)
+        if (ki == k->second) return;  // a point is observed once per keyframe
+      for (const auto& [ki, oi] : obs)
+        ++shared_[{std::min(ki, k->second), std::max(ki, k->second)}];
+    } else {
+      // A track past the cap: no covisibility counts, and a hash set of its observers (built
+      // once) keeps the once-per-keyframe test O(1).
+      auto [it, fresh] = long_track_observers_.try_emplace(p->second);
+      if (fresh)
+        for (const auto& [ki, oi] : obs) it->second.insert(ki);
+      if (!it->second.insert(k->second).second) return;
     }
     obs.push_back({k->second, static_cast<int>(obs_.size())});
     obs_.push_back(o);
@@ -1138,14 +1184,11 @@ class Corrector {
       if (options_.ba_min_parallax_deg > 0) {
         // Widest angle between two rays to the point from keyframes the BA uses.
         rays.clear();
-        double min_cos = 1.0;
         for (const auto& [k, o] : observers_[p]) {
           if (k > hi && !whole_path) continue;
-          const Eigen::Vector3d r = (X_w_[p] - centre_of(k)).normalized();
-          for (const auto& r2 : rays) min_cos = std::min(min_cos, r.dot(r2));
-          rays.push_back(r);
+          rays.push_back((X_w_[p] - centre_of(k)).normalized());
         }
-        if (min_cos > max_cos) {
+        if (detail::widest_ray_cos(rays, max_cos) > max_cos) {
           ++rep.skipped_points;
           continue;  // moves with its reference keyframe
         }
@@ -1334,7 +1377,9 @@ class Corrector {
   std::vector<Eigen::Vector3d> X_w_;                         ///< corrected points (after INIT)
   std::vector<std::vector<std::pair<int, int>>> observers_;  ///< point -> (kf index, obs index)
   std::vector<map::Observation> obs_;
-  std::map<std::pair<int, int>, int> shared_;         ///< (kf index a < b) -> shared points
+  std::map<std::pair<int, int>, int> shared_;  ///< (kf index a < b) -> shared points
+  /// point -> its observers' kf indices, for tracks longer than covisibility_max_track
+  std::unordered_map<int, std::unordered_set<int>> long_track_observers_;
   std::vector<map::Correspondence> corr_;             ///< in use, in the order they were taken in
   std::vector<int> corr_dec_;                         ///< decision (received_ index) of corr_[j]
   std::vector<map::Correspondence> received_;         ///< every one received (duplicates aside)
