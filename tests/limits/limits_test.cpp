@@ -3,8 +3,11 @@
 // is corrected in W's one zone; a latitude beyond UTM, a coordinate of 1e300 and a 100 MB line
 // are refused with a message naming the problem, a non-zero exit and no output.
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -179,4 +182,74 @@ TEST_CASE("Places and values geodrift cannot represent are refused, nothing writ
         std::string::npos);
   CHECK(r.output.size() < 1000);
   CHECK(geodrift::test::no_outputs(dir.path(), "long_out"));
+}
+
+TEST_CASE("A COLMAP point seen by every image: the long-track path of the Corrector", "[limits]") {
+  // 1,200 images 1 m apart, weaving 5 m sideways (identity rotations; the layout of
+  // bench/support/colmap_long_track.py, where 100,000 images are measured: BENCHMARKS.md),
+  // 4 short-track points per image, one far landmark seen by all 1,200 (past the Corrector's
+  // covisibility_max_track of 1,000 and the 256 rays of the exact parallax test), listed twice
+  // by image 1,100 (a point is observed once per keyframe). Exact anchors every 100 images.
+  TempDir dir;
+  const int n = 1200;
+  const double f = 500, cx = 500, cy = 250;
+  const auto cam_x = [](int i) { return 5.0 * std::sin(i / 200.0); };
+  struct Point {
+    Eigen::Vector3d p;
+    int first, last;
+  };
+  std::vector<Point> pts{{Eigen::Vector3d(0, -20, n + 1000.0), 0, n - 1}};
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < 4; ++k)
+      pts.push_back(
+          {Eigen::Vector3d(cam_x(i) + (k - 1.5) * 5.0, k % 2 ? -2.0 : 0.5, i + 15.0 + 2.5 * k), i,
+           std::min(i + 3, n - 1)});
+  std::vector<std::ostringstream> obs(n);
+  std::vector<int> nobs(n, 0);
+  std::ostringstream points;
+  points.precision(10);
+  for (std::size_t q = 0; q < pts.size(); ++q) {
+    points << q + 1 << " " << pts[q].p.x() << " " << pts[q].p.y() << " " << pts[q].p.z()
+           << " 128 128 128 0.5";
+    for (int j = pts[q].first; j <= pts[q].last; ++j) {
+      const int copies = (q == 0 && j == 1100) ? 2 : 1;
+      for (int c = 0; c < copies; ++c) {
+        const double d = pts[q].p.z() - j;
+        obs[j] << (nobs[j] ? " " : "") << cx + f * (pts[q].p.x() - cam_x(j)) / d << " "
+               << cy + f * pts[q].p.y() / d << " " << q + 1;
+        points << " " << j + 1 << " " << nobs[j]++;
+      }
+    }
+    points << "\n";
+  }
+  std::ostringstream images, traj, anchors;
+  images.precision(10);
+  traj.precision(10);
+  anchors << "frame,x,y,z,sigma_m\n";
+  for (int i = 0; i < n; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.png", i);
+    images << i + 1 << " 1 0 0 0 " << -cam_x(i) << " 0 " << -i << " 1 " << name << "\n"
+           << obs[i].str() << "\n";
+    traj << "1 0 0 " << cam_x(i) << " 0 1 0 0 0 0 1 " << i << "\n";
+    if (i % 100 == 0) anchors << i << "," << cam_x(i) << "," << i << ",0,0.5\n";
+  }
+  std::filesystem::create_directories(dir.file("model"));
+  geodrift::test::write_text(dir.file("model/cameras.txt"), "1 PINHOLE 1000 500 500 500 500 250\n");
+  geodrift::test::write_text(dir.file("model/images.txt"), images.str());
+  geodrift::test::write_text(dir.file("model/points3D.txt"), points.str());
+  geodrift::test::write_text(dir.file("traj.txt"), traj.str());
+  geodrift::test::write_text(dir.file("anchors.csv"), anchors.str());
+  const auto r =
+      run_cli(GEODRIFT_CLI_EXE, "correct --trajectory " + dir.file("traj.txt") + " --map " +
+                                    dir.file("model") + " --anchors " + dir.file("anchors.csv") +
+                                    " --origin 55,13,0 --out " + dir.file("out"));
+  INFO(r.output);
+  REQUIRE(r.code == 0);
+  const auto rows = read_rows(dir.file("out/trajectory.csv"));
+  REQUIRE(rows.size() == static_cast<std::size_t>(n));
+  double max_err = 0;
+  for (int i = 0; i < n; ++i)
+    max_err = std::max(max_err, (rows[i].x.head<2>() - Eigen::Vector2d(cam_x(i), i)).norm());
+  CHECK(max_err < 0.02);  // exact map and anchors: 3.6 mm here (0.02 m mean at 100,000 images)
 }
