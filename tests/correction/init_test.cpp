@@ -171,3 +171,44 @@ TEST_CASE("INIT levels a straight road from the camera up vectors", "[correction
   const Eigen::Vector3d p_w(50, 10, 10);
   CHECK((res.S_wm.act(S_mw.act(p_w)) - p_w).norm() < 1e-6);
 }
+
+TEST_CASE("planar_diameter is the largest horizontal distance, on hulls of every shape",
+          "[correction][init]") {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-100, 100);
+  auto brute = [](const std::vector<Eigen::Vector3d>& p) {
+    double d = 0;
+    for (std::size_t i = 0; i < p.size(); ++i)
+      for (std::size_t j = i + 1; j < p.size(); ++j)
+        d = std::max(d, (p[i] - p[j]).head<2>().norm());
+    return d;
+  };
+  std::vector<std::vector<Eigen::Vector3d>> sets;
+  for (int n : {1, 2, 3, 5, 17, 200}) {  // random clouds
+    std::vector<Eigen::Vector3d> p;
+    for (int i = 0; i < n; ++i) p.emplace_back(u(rng), u(rng), u(rng));
+    sets.push_back(p);
+  }
+  for (int n : {3, 4, 6, 7, 64, 301}) {  // every point on the hull: regular polygons
+    std::vector<Eigen::Vector3d> p;
+    const double phase = u(rng);
+    for (int i = 0; i < n; ++i) {
+      const double a = phase + 2 * M_PI * i / n;
+      p.emplace_back(50 * std::cos(a) + 3, 20 * std::sin(a) - 7, i);
+    }
+    sets.push_back(p);
+  }
+  std::vector<Eigen::Vector3d> grid, line, same;  // parallel edges, collinear, coincident
+  for (int i = 0; i < 9; ++i)
+    for (int j = 0; j < 4; ++j) grid.emplace_back(i, 2.5 * j, 0);
+  for (int i = 0; i < 50; ++i) line.emplace_back(3 + 0.5 * (i % 7), 1 - 0.25 * (i % 7), i);
+  for (int i = 0; i < 5; ++i) same.emplace_back(4, -2, i);
+  sets.push_back(grid);
+  sets.push_back(line);
+  sets.push_back(same);
+  for (const auto& p : sets) {
+    INFO(p.size() << " points");
+    CHECK(correction::detail::planar_diameter(p) == Approx(brute(p)).margin(1e-12));
+  }
+  CHECK(correction::detail::planar_diameter({}) == 0.0);
+}

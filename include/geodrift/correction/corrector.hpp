@@ -444,8 +444,12 @@ class Corrector {
                      "keyframe " << kf.id << " at t = " << kf.timestamp
                                  << " s arrives after keyframe " << kfs_.back().id
                                  << " at t = " << kfs_.back().timestamp << " s");
+    materialize_tail(static_cast<int>(kfs_.size()) - 1);  // the new keyframe is not in the tail
     kf_index_[kf.id] = static_cast<int>(kfs_.size());
     kfs_.push_back(kf);
+    pts_of_ref_.emplace_back();
+    kf_pts_.emplace_back();
+    covisible_before_.emplace_back();
     lie::Sim3d S;
     if (initialized_) S = chain_from_previous(static_cast<int>(kfs_.size()) - 1);
     S_.push_back(S);
@@ -459,7 +463,11 @@ class Corrector {
     GEODRIFT_CHECK(
         kf_index_.count(p.reference_keyframe),
         "map point " << p.id << " names unknown reference keyframe " << p.reference_keyframe);
+    materialize_tail(static_cast<int>(kfs_.size()) - 1);  // X_w_ below is stored as is
+    const int ref = kf_index_.at(p.reference_keyframe);
     pt_index_[p.id] = static_cast<int>(pts_.size());
+    pts_of_ref_[ref].push_back(static_cast<int>(pts_.size()));
+    ref_of_pt_.push_back(ref);
     pts_.push_back(p);
     X_w_.push_back(initialized_ ? point_from_reference(static_cast<int>(pts_.size()) - 1)
                                 : Eigen::Vector3d::Zero());
@@ -479,8 +487,10 @@ class Corrector {
     if (obs.size() < cap) {
       for (const auto& [ki, oi] : obs)
         if (ki == k->second) return;  // a point is observed once per keyframe
-      for (const auto& [ki, oi] : obs)
-        ++shared_[{std::min(ki, k->second), std::max(ki, k->second)}];
+      for (const auto& [ki, oi] : obs) {
+        const int a = std::min(ki, k->second), b = std::max(ki, k->second);
+        if (++shared_[{a, b}] == 1) covisible_before_[b].push_back(a);
+      }
     } else {
       // A track past the cap: no covisibility counts, and a hash set of its observers (built
       // once) keeps the once-per-keyframe test O(1).
@@ -491,6 +501,7 @@ class Corrector {
     }
     obs.push_back({k->second, static_cast<int>(obs_.size())});
     obs_.push_back(o);
+    kf_pts_[k->second].push_back(p->second);
   }
 
   /// Adds a map-to-world correspondence and runs the correction the mode asks for.
@@ -518,8 +529,9 @@ class Corrector {
       gate_var_.push_back({0.0, 0.0});
       return;
     }
-    for (const auto& d : corr_)
-      if (d.keyframe == c.keyframe && (d.y_w - c.y_w).norm() < 1e-3) {
+    const auto same_kf = corr_of_kf_.find(c.keyframe);
+    for (int j : same_kf == corr_of_kf_.end() ? std::vector<int>{} : same_kf->second)
+      if (const auto& d = corr_[j]; (d.y_w - c.y_w).norm() < 1e-3) {
         dec.why = "duplicate of correspondence " + std::to_string(d.id) +
                   " (same keyframe, within 1 mm): merged";
         received_.push_back(c);
@@ -529,6 +541,7 @@ class Corrector {
       }
     if (!initialized_) {
       dec.used = true;
+      corr_of_kf_[c.keyframe].push_back(static_cast<int>(corr_.size()));
       corr_.push_back(c);
       corr_dec_.push_back(static_cast<int>(decisions_.size()));
       received_.push_back(c);
@@ -597,12 +610,13 @@ class Corrector {
   Eigen::Vector3d received_view_center_w(int d) const {
     require_init();
     const auto& c = received_.at(d);
-    return view_sim3(c, S_[kf_index_.at(c.keyframe)]).inverse().translation();
+    return view_sim3(c, S_at(kf_index_.at(c.keyframe))).inverse().translation();
   }
 
  private:
   /// Adds an accepted correspondence after INIT and runs the mode's window step.
   void use(int d) {
+    corr_of_kf_[received_[d].keyframe].push_back(static_cast<int>(corr_.size()));
     corr_.push_back(received_[d]);
     corr_dec_.push_back(d);
     const int n = static_cast<int>(corr_.size());
@@ -654,9 +668,11 @@ class Corrector {
 
   /// Corrected pose of the i-th keyframe (insertion order): W → camera, M units.
   /// @throws Error before INIT.
-  const lie::Sim3d& keyframe_sim3(int i) const {
+  lie::Sim3d keyframe_sim3(int i) const {
     require_init();
-    return S_.at(i);
+    GEODRIFT_CHECK(i >= 0 && i < static_cast<int>(S_.size()),
+                   "keyframe index " << i << " out of range");
+    return S_at(i);
   }
   /// Corrected metric pose of the i-th keyframe in W (world → camera, metres).
   lie::SE3d keyframe_pose_w(int i) const { return keyframe_sim3(i).to_se3(); }
@@ -665,9 +681,11 @@ class Corrector {
     return keyframe_sim3(i).inverse().translation();
   }
   /// Corrected position of the i-th point (insertion order) in W.
-  const Eigen::Vector3d& point_w(int i) const {
+  Eigen::Vector3d point_w(int i) const {
     require_init();
-    return X_w_.at(i);
+    GEODRIFT_CHECK(i >= 0 && i < static_cast<int>(X_w_.size()),
+                   "point index " << i << " out of range");
+    return X_at(i);
   }
   /// Index of keyframe `id` in insertion order, or -1.
   int keyframe_index(int id) const {
@@ -689,13 +707,13 @@ class Corrector {
   /// without a covariance.
   double localization_sd_of(int j) const {
     const auto& c = corr_.at(j);
-    return localization_sd_m(c.pose_cov, S_[kf_index_.at(c.keyframe)].scale());
+    return localization_sd_m(c.pose_cov, S_at(kf_index_.at(c.keyframe)).scale());
   }
 
   /// Camera centre in W of correspondence j's geo view, as currently corrected.
   Eigen::Vector3d view_center_w(int j) const {
     const auto& c = corr_.at(j);
-    return view_sim3(c, S_[kf_index_.at(c.keyframe)]).inverse().translation();
+    return view_sim3(c, S_at(kf_index_.at(c.keyframe))).inverse().translation();
   }
 
  private:
@@ -711,7 +729,7 @@ class Corrector {
   double geo_term_sd_m(const map::Correspondence& c, int k) const {
     const double tag = tag_sd_m(c);
     if (!options_.weight_by_localization || !c.has_pose_covariance()) return tag;
-    return effective_geo_sd_m(tag, localization_sd_m(c.pose_cov, S_[k].scale()));
+    return effective_geo_sd_m(tag, localization_sd_m(c.pose_cov, S_at(k).scale()));
   }
 
   /// Standard deviations (ω, σ, ν) of a relative-pose measurement dS = S_j·S_i⁻¹ under the drift
@@ -732,12 +750,12 @@ class Corrector {
   /// keyframe a's along the current path, before the drift factor.
   double drift_variance_m2(int a, int b) const {
     if (b <= a) return 0;
-    const Eigen::Vector3d cb = S_[b].inverse().translation();
+    const Eigen::Vector3d cb = S_at(b).inverse().translation();
     double v = 0;
     for (int i = a + 1; i <= b; ++i) {
       const lie::Sim3d dS = sim3(kfs_[i].T_cw * kfs_[i - 1].T_cw.inverse());
       const Eigen::Matrix<double, 7, 1> sd = edge_sd(dS, map_per_metre());
-      const double arm2 = (cb - S_[i - 1].inverse().translation()).head<2>().squaredNorm();
+      const double arm2 = (cb - S_at(i - 1).inverse().translation()).head<2>().squaredNorm();
       const double t = sd[4] / map_per_metre();  // metres
       v += arm2 * (sd[0] * sd[0] + sd[3] * sd[3]) + 2 * t * t;
     }
@@ -750,7 +768,7 @@ class Corrector {
   /// model's, before the drift factor): V = fixed + k·drift.
   Eigen::Vector2d innovation(const map::Correspondence& c, double* fixed, double* drift) const {
     const int b = kf_index_.at(c.keyframe);
-    const Eigen::Vector3d pred = view_sim3(c, S_[b]).inverse().translation();
+    const Eigen::Vector3d pred = view_sim3(c, S_at(b)).inverse().translation();
     int last = -1;  // newest anchor in use at or before b
     for (int j = static_cast<int>(corr_.size()) - 1; j >= 0 && last < 0; --j)
       if (kf_index_.at(corr_[j].keyframe) <= b) last = j;
@@ -777,8 +795,8 @@ class Corrector {
   /// matches the one the path predicts between their views, within the gate.
   bool agree(const map::Correspondence& p, const map::Correspondence& c, double chi2) const {
     const int a = kf_index_.at(p.keyframe), b = kf_index_.at(c.keyframe);
-    const Eigen::Vector3d pa = view_sim3(p, S_[a]).inverse().translation();
-    const Eigen::Vector3d pb = view_sim3(c, S_[b]).inverse().translation();
+    const Eigen::Vector3d pa = view_sim3(p, S_at(a)).inverse().translation();
+    const Eigen::Vector3d pb = view_sim3(c, S_at(b)).inverse().translation();
     const Eigen::Vector2d d = ((pb - pa) - (c.y_w - p.y_w)).head<2>();
     const double sa = tag_sd_m(p), sb = tag_sd_m(c);
     const double V = 2 * (sa * sa + sb * sb) + drift_factor_ * drift_variance_m2(a, b);
@@ -847,6 +865,7 @@ class Corrector {
     rep.correspondence = static_cast<int>(corr_.size()) - 1;
     try {
       const PiecewiseResult r = piecewise_similarity(T, a, init_.R_level.row(2).transpose(), po);
+      clear_tail();
       S_ = r.S;
       for (std::size_t q = 0; q < pts_.size(); ++q) {
         const int k = kf_index_.at(pts_[q].reference_keyframe);
@@ -871,11 +890,11 @@ class Corrector {
 
   lie::Sim3d chain_from_previous(int i) const {
     // S_i = (T_i · T_{i-1}⁻¹) · S_{i-1}: the raw relative pose, at the predecessor's scale.
-    return sim3(kfs_[i].T_cw * kfs_[i - 1].T_cw.inverse()) * S_[i - 1];
+    return sim3(kfs_[i].T_cw * kfs_[i - 1].T_cw.inverse()) * S_at(i - 1);
   }
   Eigen::Vector3d point_from_reference(int p) const {
     const int r = kf_index_.at(pts_[p].reference_keyframe);
-    return S_[r].inverse().act(kfs_[r].T_cw.act(pts_[p].position));
+    return S_at(r).inverse().act(kfs_[r].T_cw.act(pts_[p].position));
   }
 
   // ---- INIT ---------------------------------------------------------------------------------
@@ -951,10 +970,14 @@ class Corrector {
       }
       corr_ = std::move(kept);
       corr_dec_ = std::move(kept_dec);
+      corr_of_kf_.clear();
+      for (std::size_t i = 0; i < corr_.size(); ++i)
+        corr_of_kf_[corr_[i].keyframe].push_back(static_cast<int>(i));
     }
     // The first window is the one of the next correspondence: [n + 1 − w, n].
     first_window_ = static_cast<int>(corr_.size()) + 1 - options_.window_correspondences;
     const lie::Sim3d S_mw = init_.S_wm.inverse();
+    clear_tail();
     for (std::size_t i = 0; i < kfs_.size(); ++i) S_[i] = sim3(kfs_[i].T_cw) * S_mw;
     for (std::size_t p = 0; p < pts_.size(); ++p) X_w_[p] = init_.S_wm.act(pts_[p].position);
     rep.kind = "init";
@@ -997,28 +1020,58 @@ class Corrector {
   }
 
   /// Applies new window poses: points follow their reference keyframe's correction, keyframes
-  /// after the window (and their points) follow the last window keyframe's.
+  /// after the window (and their points) follow the last window keyframe's. O(window + points
+  /// of the window): the keyframes after it share one correction, which stays lazy (tail_D_).
   void apply_window_update(int lo, int hi, const std::vector<lie::Sim3d>& S_new) {
+    materialize_tail(hi);
     const int n = static_cast<int>(kfs_.size());
-    std::vector<lie::Sim3d> delta(n);  // S_new⁻¹ · S_old, W → W, per moved keyframe
-    std::vector<char> moved(n, 0);
+    lie::Sim3d last_delta;  // S_new⁻¹ · S_old of the last window keyframe, W → W
     for (int i = lo; i <= hi; ++i) {
-      delta[i] = S_new[i - lo].inverse() * S_[i];
+      const lie::Sim3d delta = S_new[i - lo].inverse() * S_[i];
       S_[i] = S_new[i - lo];
-      moved[i] = 1;
+      for (int p : pts_of_ref_[i]) X_w_[p] = delta.act(X_w_[p]);
+      if (i == hi) last_delta = delta;
     }
-    // Keyframes after the window keep their relative pose to the last window keyframe.
-    const lie::Sim3d last_delta = delta[hi];
-    for (int i = hi + 1; i < n; ++i) {
-      const lie::Sim3d S_old = S_[i];
-      S_[i] = S_old * last_delta.inverse();
-      delta[i] = last_delta;
-      moved[i] = 1;
+    if (hi + 1 >= n) return;
+    // Keyframes after the window keep their relative pose to the last window keyframe: those
+    // stored as they are (up to the lazy tail) now, the tail by composing its correction.
+    if (tail_from_ == kNoTail) {
+      tail_from_ = hi + 1;
+      tail_D_ = lie::Sim3d();
     }
-    for (std::size_t p = 0; p < pts_.size(); ++p) {
-      const int r = kf_index_.at(pts_[p].reference_keyframe);
-      if (moved[r]) X_w_[p] = delta[r].act(X_w_[p]);
+    const lie::Sim3d last_inverse = last_delta.inverse();
+    for (int i = hi + 1; i < tail_from_; ++i) {  // after a window that ended later than this one
+      S_[i] = S_[i] * last_inverse;
+      for (int p : pts_of_ref_[i]) X_w_[p] = last_delta.act(X_w_[p]);
     }
+    tail_D_ = last_delta * tail_D_;
+    tail_D_inverse_ = tail_D_.inverse();
+  }
+
+  /// Keyframe i's corrected pose: S_[i] as stored, or through the lazy tail's correction.
+  lie::Sim3d S_at(int i) const { return i >= tail_from_ ? S_[i] * tail_D_inverse_ : S_[i]; }
+  /// Point p's corrected position, likewise by its reference keyframe.
+  Eigen::Vector3d X_at(int p) const {
+    return ref_of_pt_[p] >= tail_from_ ? tail_D_.act(X_w_[p]) : X_w_[p];
+  }
+  void set_X(int p, const Eigen::Vector3d& X) {
+    X_w_[p] = ref_of_pt_[p] >= tail_from_ ? tail_D_inverse_.act(X) : X;
+  }
+  /// Stores keyframes up to index `last` (and their points) with the tail's correction applied.
+  void materialize_tail(int last) {
+    const int end = std::min(last, static_cast<int>(kfs_.size()) - 1);
+    if (end < tail_from_) return;
+    for (int i = tail_from_; i <= end; ++i) {
+      S_[i] = S_[i] * tail_D_inverse_;
+      for (int p : pts_of_ref_[i]) X_w_[p] = tail_D_.act(X_w_[p]);
+    }
+    tail_from_ = end + 1;
+    if (tail_from_ >= static_cast<int>(kfs_.size())) clear_tail();
+  }
+  void clear_tail() {
+    tail_from_ = kNoTail;
+    tail_D_ = lie::Sim3d();
+    tail_D_inverse_ = lie::Sim3d();
   }
 
   // ---- PGO (paper Sec. 3.5) ----------------------------------------------------------------
@@ -1029,20 +1082,21 @@ class Corrector {
     StepReport rep = window_report("pgo", last, lo, hi);
 
     const int nw = hi - lo + 1;
+    materialize_tail(hi);
     std::vector<lie::Sim3d> S(S_.begin() + lo, S_.begin() + hi + 1);  // window nodes
     std::map<int, lie::Sim3d> fixed;                                  // covisible past
     const int nv = last - first + 1;
     std::vector<lie::Sim3d> V(nv);  // geo view nodes
     for (int j = 0; j < nv; ++j) {
       const auto& c = corr_[first + j];
-      V[j] = view_sim3(c, S_[kf_index_.at(c.keyframe)]);
+      V[j] = view_sim3(c, S_at(kf_index_.at(c.keyframe)));
     }
     solver::Problem problem;
     const solver::RobustLoss trivial;
     int edges = 0;
     auto node = [&](int i) -> lie::Sim3d* {
       if (i >= lo && i <= hi) return &S[i - lo];
-      return &fixed.try_emplace(i, S_[i]).first->second;
+      return &fixed.try_emplace(i, S_at(i)).first->second;
     };
     const bool paper = options_.edge_weights == CorrectorOptions::EdgeWeights::kPaper;
     auto add_e1 = [&](int i, int j) {
@@ -1059,11 +1113,15 @@ class Corrector {
       ++edges;
     };
     std::set<std::pair<int, int>> linked;
-    for (const auto& [pair, count] : shared_) {
-      const auto [a, b] = pair;  // a < b
-      if (count < options_.min_shared_points) continue;
-      if (b < lo || a > hi || b > hi) continue;  // needs one end in the window, none after it
-      add_e1(a, b);
+    // Covisible pairs with one end in the window and none after it: b in [lo, hi], in the
+    // order of shared_.
+    std::vector<std::pair<int, int>> covisible;
+    for (int b = lo; b <= hi; ++b)
+      for (int a : covisible_before_[b]) covisible.emplace_back(a, b);
+    std::sort(covisible.begin(), covisible.end());
+    for (const auto& pair : covisible) {
+      if (shared_.at(pair) < options_.min_shared_points) continue;
+      add_e1(pair.first, pair.second);
       linked.insert(pair);
     }
     if (options_.link_consecutive) {
@@ -1135,7 +1193,8 @@ class Corrector {
     // anchors, docs/correction_model.md): the window keeps its state, and the report says so.
     double rescale = 1.0;
     for (int i = lo; i <= hi; ++i)
-      rescale = std::max(rescale, std::exp(std::abs(std::log(S[i - lo].scale() / S_[i].scale()))));
+      rescale =
+          std::max(rescale, std::exp(std::abs(std::log(S[i - lo].scale() / S_at(i).scale()))));
     if (usable(sum) && rescale <= options_.max_window_rescale) {
       apply_window_update(lo, hi, S);
     } else if (usable(sum)) {
@@ -1155,52 +1214,48 @@ class Corrector {
     const std::clock_t c0 = std::clock();
     StepReport rep = window_report("ba", last, lo, hi);
 
+    materialize_tail(hi);
     const int nw = hi - lo + 1;
     std::vector<lie::SE3d> T(nw);
-    for (int i = 0; i < nw; ++i) T[i] = S_[lo + i].to_se3();
+    for (int i = 0; i < nw; ++i) T[i] = S_at(lo + i).to_se3();
     std::map<int, lie::SE3d> fixed;
     // Points seen by window keyframes (C5), optimised in W.
     std::vector<int> pts;
-    // Keyframe centres in W, for the parallax test.
-    std::vector<Eigen::Vector3d> centre(kfs_.size());
-    std::vector<char> have_centre(kfs_.size(), 0);
+    // Keyframe centres in W, for the parallax test (the window's and its points' observers).
+    std::unordered_map<int, Eigen::Vector3d> centre;
     auto centre_of = [&](int k) -> const Eigen::Vector3d& {
-      if (!have_centre[k]) {
-        centre[k] = S_[k].inverse().translation();
-        have_centre[k] = 1;
-      }
-      return centre[k];
+      auto [it, fresh] = centre.try_emplace(k);
+      if (fresh) it->second = S_at(k).inverse().translation();
+      return it->second;
     };
     const double max_cos = std::cos(options_.ba_min_parallax_deg * M_PI / 180.0);
     std::vector<Eigen::Vector3d> rays;
-    for (std::size_t p = 0; p < pts_.size(); ++p) {
-      bool seen = false;
-      for (const auto& [k, o] : observers_[p])
-        if (k >= lo && k <= hi) {
-          seen = true;
-          break;
-        }
-      if (!seen) continue;
+    // The points window keyframes observe, in index order.
+    std::vector<int> seen;
+    for (int k = lo; k <= hi; ++k) seen.insert(seen.end(), kf_pts_[k].begin(), kf_pts_[k].end());
+    std::sort(seen.begin(), seen.end());
+    seen.erase(std::unique(seen.begin(), seen.end()), seen.end());
+    for (const int p : seen) {
       if (options_.ba_min_parallax_deg > 0) {
         // Widest angle between two rays to the point from keyframes the BA uses.
         rays.clear();
         for (const auto& [k, o] : observers_[p]) {
           if (k > hi && !whole_path) continue;
-          rays.push_back((X_w_[p] - centre_of(k)).normalized());
+          rays.push_back((X_at(p) - centre_of(k)).normalized());
         }
         if (detail::widest_ray_cos(rays, max_cos) > max_cos) {
           ++rep.skipped_points;
           continue;  // moves with its reference keyframe
         }
       }
-      pts.push_back(static_cast<int>(p));
+      pts.push_back(p);
     }
     std::vector<Eigen::Vector3d> X(pts.size());
-    for (std::size_t q = 0; q < pts.size(); ++q) X[q] = X_w_[pts[q]];
+    for (std::size_t q = 0; q < pts.size(); ++q) X[q] = X_at(pts[q]);
 
     auto pose = [&](int k) -> lie::SE3d* {
       if (k >= lo && k <= hi) return &T[k - lo];
-      return &fixed.try_emplace(k, S_[k].to_se3()).first->second;
+      return &fixed.try_emplace(k, S_at(k).to_se3()).first->second;
     };
     // The reprojection terms (C_map-kf of the points C5), built once; the problem is rebuilt
     // per robust round (the Huber threshold is fixed per residual block).
@@ -1254,7 +1309,7 @@ class Corrector {
         const int k = kf_index_.at(c.keyframe);
         if (!problem.has_parameter(&T[k - lo])) continue;  // all its observations gated out
         // The keyframe→view offset in metres at the keyframe's current scale.
-        const double s_k = S_[k].scale();
+        const double s_k = S_at(k).scale();
         const Eigen::Vector3d c_vk = c.T_vk.inverse().translation() / s_k;
         const double sigma = geo_term_sd_m(c, k);
         problem.add_residual_block(GeoViewCentreResidual{c_vk, c.y_w}, solver::RobustLoss(),
@@ -1328,12 +1383,12 @@ class Corrector {
       std::vector<lie::Sim3d> S_new(nw);
       for (int i = 0; i < nw; ++i) {
         // Back to Sim3 at the keyframe's scale: [s·R | s·t].
-        const double s = S_[lo + i].scale();
+        const double s = S_at(lo + i).scale();
         S_new[i] = lie::Sim3d(T[i].rotation(), s * T[i].translation(), s);
       }
       // Points of the window were optimised directly: overwrite what the update rule moved.
       apply_window_update(lo, hi, S_new);
-      for (std::size_t q = 0; q < pts.size(); ++q) X_w_[pts[q]] = X[q];
+      for (std::size_t q = 0; q < pts.size(); ++q) set_X(pts[q], X[q]);
     }
     rep.seconds = seconds_since(t0);
     rep.cpu_seconds = cpu_seconds_since(c0);
@@ -1374,13 +1429,23 @@ class Corrector {
   std::vector<lie::Sim3d> S_;  ///< corrected keyframe poses (valid after INIT)
   std::vector<map::MapPoint> pts_;
   std::unordered_map<int, int> pt_index_;
-  std::vector<Eigen::Vector3d> X_w_;                         ///< corrected points (after INIT)
+  std::vector<Eigen::Vector3d> X_w_;  ///< corrected points (after INIT)
+  /// The lazy tail of the window updates: keyframes from index tail_from_ on store S_[i] with
+  /// S_true = S_[i]·tail_D_⁻¹, and their points X_true = tail_D_·X_w_ (S_at, X_at).
+  static constexpr int kNoTail = std::numeric_limits<int>::max();
+  int tail_from_ = kNoTail;
+  lie::Sim3d tail_D_, tail_D_inverse_;
+  std::vector<std::vector<int>> pts_of_ref_;        ///< kf index -> points it is the reference of
+  std::vector<int> ref_of_pt_;                      ///< point -> its reference keyframe's index
+  std::vector<std::vector<int>> kf_pts_;            ///< kf index -> points it observes
+  std::vector<std::vector<int>> covisible_before_;  ///< kf index b -> every a < b in shared_
   std::vector<std::vector<std::pair<int, int>>> observers_;  ///< point -> (kf index, obs index)
   std::vector<map::Observation> obs_;
   std::map<std::pair<int, int>, int> shared_;  ///< (kf index a < b) -> shared points
   /// point -> its observers' kf indices, for tracks longer than covisibility_max_track
   std::unordered_map<int, std::unordered_set<int>> long_track_observers_;
-  std::vector<map::Correspondence> corr_;             ///< in use, in the order they were taken in
+  std::vector<map::Correspondence> corr_;  ///< in use, in the order they were taken in
+  std::unordered_map<int, std::vector<int>> corr_of_kf_;  ///< keyframe id -> corr_ indices
   std::vector<int> corr_dec_;                         ///< decision (received_ index) of corr_[j]
   std::vector<map::Correspondence> received_;         ///< every one received (duplicates aside)
   std::vector<AnchorDecision> decisions_;             ///< what was done with received_[d]

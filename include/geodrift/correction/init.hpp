@@ -122,6 +122,43 @@ inline bool fit_similarity_closed_form(const std::vector<Eigen::Vector3d>& p,
   return true;
 }
 
+/// Largest horizontal (x, y) distance between two of `points`, exactly, in O(n log n): the
+/// convex hull (monotone chain), then its antipodal pairs (rotating calipers).
+inline double planar_diameter(const std::vector<Eigen::Vector3d>& points) {
+  std::vector<Eigen::Vector2d> q(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) q[i] = points[i].head<2>();
+  std::sort(q.begin(), q.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  q.erase(std::unique(q.begin(), q.end()), q.end());
+  const int n = static_cast<int>(q.size());
+  if (n < 2) return 0.0;
+  auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x();
+  };
+  std::vector<Eigen::Vector2d> hull(2 * n);  // counter-clockwise, no collinear vertices
+  int m = 0;
+  for (int i = 0; i < n; ++i) {
+    while (m >= 2 && cross(hull[m - 2], hull[m - 1], q[i]) <= 0) --m;
+    hull[m++] = q[i];
+  }
+  for (int i = n - 2, lower = m + 1; i >= 0; --i) {
+    while (m >= lower && cross(hull[m - 2], hull[m - 1], q[i]) <= 0) --m;
+    hull[m++] = q[i];
+  }
+  --m;                                              // the last vertex repeats the first
+  if (m < 3) return (q.back() - q.front()).norm();  // collinear: the sorted extremes
+  double best = 0;
+  for (int i = 0, j = 1; i < m; ++i) {
+    const int ni = (i + 1) % m;
+    // Advance j while it moves away from edge (i, i+1): the vertex farthest from the edge.
+    while (cross(hull[i], hull[ni], hull[(j + 1) % m]) > cross(hull[i], hull[ni], hull[j]))
+      j = (j + 1) % m;
+    best = std::max({best, (hull[i] - hull[j]).norm(), (hull[ni] - hull[j]).norm()});
+  }
+  return best;
+}
+
 }  // namespace detail
 
 /// INIT (paper Sec. 3.4): levels the map by the PCA plane of the camera centres (normal -> W's
@@ -197,14 +234,10 @@ inline InitResult estimate_init(const std::vector<Eigen::Vector3d>& centres_m,
   for (int i = 0; i < n; ++i) p[i] = out.R_level * anchor_m[i];
 
   // ---- 2. degeneracy: coincident anchors leave scale and yaw unobservable -----------------
-  double spread_w = 0, spread_m = 0, extent_m = 0;
-  for (int i = 0; i < n; ++i) {
-    extent_m = std::max(extent_m, p[i].head<2>().norm());
-    for (int j = i + 1; j < n; ++j) {
-      spread_w = std::max(spread_w, (anchor_w[i] - anchor_w[j]).head<2>().norm());
-      spread_m = std::max(spread_m, (p[i] - p[j]).head<2>().norm());
-    }
-  }
+  double extent_m = 0;
+  for (int i = 0; i < n; ++i) extent_m = std::max(extent_m, p[i].head<2>().norm());
+  const double spread_w = detail::planar_diameter(anchor_w);
+  const double spread_m = detail::planar_diameter(p);
   if (spread_w < options.min_anchor_spread_m) {
     out.message = "init: the correspondences' geo-tags all lie within " + std::to_string(spread_w) +
                   " m of each other (minimum spread " +
