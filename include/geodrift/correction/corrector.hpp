@@ -530,15 +530,16 @@ class Corrector {
       return;
     }
     const auto same_kf = corr_of_kf_.find(c.keyframe);
-    for (int j : same_kf == corr_of_kf_.end() ? std::vector<int>{} : same_kf->second)
-      if (const auto& d = corr_[j]; (d.y_w - c.y_w).norm() < 1e-3) {
-        dec.why = "duplicate of correspondence " + std::to_string(d.id) +
-                  " (same keyframe, within 1 mm): merged";
-        received_.push_back(c);
-        decisions_.push_back(dec);
-        gate_var_.push_back({0.0, 0.0});
-        return;
-      }
+    if (same_kf != corr_of_kf_.end())
+      for (int j : same_kf->second)
+        if (const auto& d = corr_[j]; (d.y_w - c.y_w).norm() < 1e-3) {
+          dec.why = "duplicate of correspondence " + std::to_string(d.id) +
+                    " (same keyframe, within 1 mm): merged";
+          received_.push_back(c);
+          decisions_.push_back(dec);
+          gate_var_.push_back({0.0, 0.0});
+          return;
+        }
     if (!initialized_) {
       dec.used = true;
       corr_of_kf_[c.keyframe].push_back(static_cast<int>(corr_.size()));
