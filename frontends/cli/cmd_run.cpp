@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <geodrift/correction/corrector.hpp>
+#include <geodrift/correction/replay.hpp>
+#include <geodrift/correction/screening.hpp>
 #include <geodrift/error.hpp>
 #include <geodrift/io/colmap_text.hpp>
 #include <geodrift/io/ply.hpp>
@@ -67,6 +69,13 @@ inputs
                       (default 1: every keyframe; keyframes are ~1 m apart on a car, geo-tags
                       often 5 m or more)
   --geotag-top-k K    views tried per keyframe once the gate is active (default 5)
+  --no-screen-anchors use every localized view as it comes. By default, once the video is
+                      done, each geo-tag is tested against all the others along the VO path
+                      (one localization per geo-tag first, then every localization of the
+                      geo-tags kept: correction/screening.hpp); if any is left out the
+                      correction is run again over the final map without it. A wrong
+                      geo-tag (a mis-tagged panorama, a retrieval mistake) is then listed as
+                      not used in correspondences.csv and report.json
   --photo-hfov-deg D  horizontal field of view of geo-tagged photos whose CSV row has no
                       fx..cy (default: from EXIF FocalLengthIn35mmFilm); --geotags folder only
 
@@ -85,7 +94,8 @@ outputs in DIR (map frame M: the VO's own frame and arbitrary scale; geodrift ve
                       keyframe's final (bundle-adjusted) pose
   keyframes_kitti.txt keyframes only, with their frame index
   with --geotags (frame W): trajectory.csv, trajectory_kitti.txt and trajectory_tum.txt hold the
-                      corrected path; correspondences.csv the localized views; attempts.csv
+                      corrected path; correspondences.csv every localized view, whether the
+                      correction used it (why not) and its screening statistic; attempts.csv
                       every keyframe x view attempt (counts, inliers, tilt, position error);
                       vo_keyframes_kitti.txt the uncorrected VO keyframes in M after a frame
                       index (for a Sim(3)-aligned baseline with `geodrift eval`)
@@ -98,6 +108,8 @@ std::string json_num(double v) {
   return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
 }
 
+std::string csv_num(double v) { return std::isfinite(v) ? io::detail::fmt(v) : std::string(); }
+
 }  // namespace
 
 int run_run(int argc, char** argv) {
@@ -105,7 +117,7 @@ int run_run(int argc, char** argv) {
       argc, argv,
       {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every", "geotag-top-k",
        "photo-hfov-deg", "fps", "max-frames", "features", "threads", "out"},
-      {"help", "force"});
+      {"help", "force", "no-screen-anchors"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
     return 0;
@@ -226,6 +238,7 @@ int run_run(int argc, char** argv) {
     geo_loc = std::make_unique<geotag::GeoLocalizer>(*geo_db, geo_frame, po);
   }
   std::unordered_map<int, Eigen::Vector3d> geo_points;  // final map points, M
+  std::vector<map::Correspondence> geo_all;             // every localized view, in order
   int geo_attempts = 0, geo_corrs = 0;
   // Every keyframe x view attempt, for attempts.csv: the view centre in the keyframe's camera
   // frame (M units) is mapped to W through the keyframe's corrected pose at the end.
@@ -234,7 +247,9 @@ int run_run(int argc, char** argv) {
     Eigen::Vector3d center_k = Eigen::Vector3d::Constant(NAN);
   };
   std::vector<GeoAttemptRow> geo_rows;
-  double geo_s = 0;
+  double geo_s = 0, screen_s = 0;
+  const bool screen = !args.flag("no-screen-anchors");
+  correction::AnchorScreening screening;
 #endif
 
   // ---- VO -> Corrector ----------------------------------------------------------------------
@@ -282,6 +297,7 @@ int run_run(int argc, char** argv) {
           geo_rows.push_back(std::move(row));
         }
         for (const map::Correspondence& c : cs) corrector.add_correspondence(c);
+        geo_all.insert(geo_all.end(), cs.begin(), cs.end());
         geo_corrs += static_cast<int>(cs.size());
       }
       geo_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - tg).count();
@@ -369,16 +385,43 @@ int run_run(int argc, char** argv) {
       throw Error(std::to_string(geo_corrs) + " geo views localized in " +
                   std::to_string(geo_attempts) + " attempts; INIT needs 4 (" +
                   corrector.init_message() + ")");
+    // Wrong geo-tags: every one tested against all the others along the final VO path; the
+    // streamed correction used them as they came, so with any left out it is run again over
+    // the final map (the same stream `geodrift correct` replays) without them.
+    std::unique_ptr<correction::Corrector> rescreened;
+    const auto ts = std::chrono::steady_clock::now();
+    if (screen) {
+      screening = correction::screen_anchors_by_geotag(m.keyframes, geo_all);
+      if (!screening.ok) {
+        std::fprintf(stderr, "geodrift run: warning: geo-tags not screened: %s\n",
+                     screening.message.c_str());
+      } else if (2 * screening.num_left_out() > static_cast<int>(geo_all.size())) {
+        throw Error(std::to_string(screening.num_left_out()) + " of the " +
+                    std::to_string(geo_all.size()) +
+                    " localized geo views disagree with the others beyond what the VO can have "
+                    "drifted (geo-tags of another place, or a broken VO path): no trustworthy "
+                    "result, nothing written (--no-screen-anchors uses them all)");
+      } else if (screening.num_left_out() > 0) {
+        rescreened = std::make_unique<correction::Corrector>();
+        correction::apply_screening(screening, geo_all, rescreened.get());
+        correction::replay(m, geo_all, rescreened.get());
+        if (!rescreened->initialized())
+          throw Error("INIT failed over the geo views the screening kept (" +
+                      rescreened->init_message() + "); nothing written");
+        for (const correction::ScreenedAnchor& a : screening.anchors)
+          if (!a.used) std::fprintf(stderr, "geodrift run: geo view not used: %s\n", a.why.c_str());
+      }
+    }
+    screen_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    const correction::Corrector& fin = rescreened ? *rescreened : corrector;
     // Every tracked frame in W: its raw pose relative to its keyframe composed with the
     // keyframe's corrected Sim(3) pose.
     std::map<int, int> ci_of_frame;
-    for (int i = 0; i < corrector.num_keyframes(); ++i)
-      ci_of_frame[corrector.keyframes()[i].frame_index] = i;
+    for (int i = 0; i < fin.num_keyframes(); ++i) ci_of_frame[fin.keyframes()[i].frame_index] = i;
     int last_anchor_frame = -1;
-    for (const map::Correspondence& c : corrector.correspondences())
+    for (const map::Correspondence& c : fin.correspondences())
       last_anchor_frame =
-          std::max(last_anchor_frame,
-                   corrector.keyframes()[corrector.keyframe_index(c.keyframe)].frame_index);
+          std::max(last_anchor_frame, fin.keyframes()[fin.keyframe_index(c.keyframe)].frame_index);
     std::vector<io::TrajectoryCsvRow> rows;
     io::Trajectory w_traj;
     w_traj.has_timestamps = true;
@@ -388,7 +431,7 @@ int run_run(int argc, char** argv) {
       if (it == ci_of_frame.begin() || !raw.count(std::prev(it)->first)) continue;
       --it;
       const lie::SE3d dT = T_raw * raw.at(it->first).inverse();
-      const lie::SE3d T = (lie::Sim3d(dT) * corrector.keyframe_sim3(it->second)).to_se3();
+      const lie::SE3d T = (lie::Sim3d(dT) * fin.keyframe_sim3(it->second)).to_se3();
       io::TrajectoryCsvRow r;
       r.frame = fi;
       r.timestamp = stamps.count(fi) ? stamps.at(fi) : NAN;
@@ -410,13 +453,27 @@ int run_run(int argc, char** argv) {
     io::write_trajectory_tum(out.path("trajectory_tum.txt"), w_traj, wnote);
     std::ofstream cs(out.path("correspondences.csv"));
     cs << "# geodrift " << kVersion << " localized geo views; y in " << wnote << "\n"
-       << "id,keyframe,frame,geotag,x,y,z,inliers,reprojection_rms_px\n";
-    for (const map::Correspondence& c : corrector.correspondences())
+       << "id,keyframe,frame,geotag,x,y,z,inliers,reprojection_rms_px,used,"
+          "screening_statistic,screening_innovation_m,screening_sd_m,why_not\n";
+    std::unordered_map<int, const correction::AnchorDecision*> decision_of;
+    for (const correction::AnchorDecision& d : fin.anchor_decisions()) decision_of[d.id] = &d;
+    for (std::size_t q = 0; q < geo_all.size(); ++q) {
+      const map::Correspondence& c = geo_all[q];
+      const auto d = decision_of.find(c.id);
+      const bool used = d != decision_of.end() && d->second->used;
+      std::string why = d == decision_of.end() ? "not received by the correction" : d->second->why;
+      for (char& ch : why)
+        if (ch == ',' || ch == '\n') ch = ';';
+      const bool tested = screening.ok && q < screening.anchors.size();
       cs << c.id << "," << c.keyframe << ","
-         << corrector.keyframes()[corrector.keyframe_index(c.keyframe)].frame_index << ","
-         << c.geotag_id << "," << io::detail::fmt(c.y_w.x()) << "," << io::detail::fmt(c.y_w.y())
-         << "," << io::detail::fmt(c.y_w.z()) << "," << c.inliers << ","
-         << io::detail::fmt(c.reprojection_rms) << "\n";
+         << fin.keyframes()[fin.keyframe_index(c.keyframe)].frame_index << "," << c.geotag_id << ","
+         << io::detail::fmt(c.y_w.x()) << "," << io::detail::fmt(c.y_w.y()) << ","
+         << io::detail::fmt(c.y_w.z()) << "," << c.inliers << ","
+         << io::detail::fmt(c.reprojection_rms) << "," << (used ? 1 : 0) << ","
+         << (tested ? csv_num(screening.anchors[q].statistic) : "") << ","
+         << (tested ? csv_num(screening.anchors[q].innovation_m) : "") << ","
+         << (tested ? csv_num(screening.anchors[q].sd_m) : "") << "," << why << "\n";
+    }
     close_checked(cs, out.path("correspondences.csv"));
     std::ofstream as(out.path("attempts.csv"));
     as << "# geodrift " << kVersion << " every keyframe x retrieved view attempt; x,y,z = the "
@@ -426,18 +483,17 @@ int run_run(int argc, char** argv) {
           "accepted,x,y,z,dx_m,reason\n";
     for (const GeoAttemptRow& g : geo_rows) {
       const geotag::ViewAttempt& a = g.a;
-      const int ki = corrector.keyframe_index(a.keyframe);
+      const int ki = fin.keyframe_index(a.keyframe);
       const geotag::GeoView& v = geo_db->views()[a.view];
       const map::GeoTag& tag = geo_db->sources()[v.source].tag;
       const Eigen::Vector3d y = geo_frame.to_world(tag.latitude_deg, tag.longitude_deg, tag.height);
-      as << a.keyframe << "," << (ki >= 0 ? corrector.keyframes()[ki].frame_index : -1) << ","
-         << a.view << "," << tag.id << "," << io::detail::fmt(a.score) << "," << a.putative << ","
-         << a.kept << "," << a.pairs_3d << "," << a.result.inliers << ","
-         << io::detail::fmt(a.result.rms_px) << ","
-         << (std::isfinite(a.tilt_deg) ? io::detail::fmt(a.tilt_deg) : "") << ","
+      as << a.keyframe << "," << (ki >= 0 ? fin.keyframes()[ki].frame_index : -1) << "," << a.view
+         << "," << tag.id << "," << io::detail::fmt(a.score) << "," << a.putative << "," << a.kept
+         << "," << a.pairs_3d << "," << a.result.inliers << "," << io::detail::fmt(a.result.rms_px)
+         << "," << (std::isfinite(a.tilt_deg) ? io::detail::fmt(a.tilt_deg) : "") << ","
          << (a.result.ok ? 1 : 0) << ",";
       if (ki >= 0 && g.center_k.allFinite()) {
-        const Eigen::Vector3d c = corrector.keyframe_sim3(ki).inverse().act(g.center_k);
+        const Eigen::Vector3d c = fin.keyframe_sim3(ki).inverse().act(g.center_k);
         as << io::detail::fmt(c.x()) << "," << io::detail::fmt(c.y()) << ","
            << io::detail::fmt(c.z()) << ","
            << io::detail::fmt(std::hypot(c.x() - y.x(), c.y() - y.y()));
@@ -509,7 +565,14 @@ int run_run(int argc, char** argv) {
         << ", \"kvld\": " << json_num(geo_loc->stats().kvld_cpu_s)
         << ", \"pnp\": " << json_num(geo_loc->stats().pnp_cpu_s)
         << ", \"total\": " << json_num(geo_loc->stats().total_cpu_s) << "}"
-        << ", \"frame\": " << io::detail::json_string(geo_frame.description()) << "}";
+        << ", \"frame\": " << io::detail::json_string(geo_frame.description())
+        << ", \"screening\": {\"enabled\": " << (screen ? "true" : "false")
+        << ", \"ok\": " << (screening.ok ? "true" : "false")
+        << ", \"message\": " << io::detail::json_string(screening.message)
+        << ", \"left_out\": " << screening.num_left_out()
+        << ", \"drift_variance_factor\": " << json_num(screening.ok ? screening.drift_factor : NAN)
+        << ", \"threshold_chi2\": " << json_num(screening.ok ? screening.threshold : NAN)
+        << ", \"rounds\": " << screening.rounds << ", \"seconds\": " << json_num(screen_s) << "}}";
     else
 #endif
       j << "null";

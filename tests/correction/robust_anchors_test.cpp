@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 #include <string>
+#include <unordered_map>
 
 #include "geodrift/correction/replay.hpp"
 #include "geodrift/correction/screening.hpp"
@@ -258,4 +259,131 @@ TEST_CASE("Screening reports what it cannot test and rejects what it cannot read
   CHECK_THROWS_WITH(correction::screen_anchors(kfs, corr),
                     Catch::Contains("keyframe " + std::to_string(kfs[7].id) + " translation") &&
                         Catch::Contains("exceeds 1e+12"));
+}
+
+// ---- geo-tags localized from several keyframes (`geodrift run`) ----------------------------
+
+namespace {
+
+/// Every geo-tag of `corr` localized from its keyframe and the keyframes `offsets` away, as
+/// `geodrift run` localizes a panorama from each keyframe that retrieves it: the same view
+/// pose in M, the same geo-tag position and id. Ids are renumbered in order.
+std::vector<map::Correspondence> with_siblings(const sim::SimulatedSequence& s,
+                                               const std::vector<map::Correspondence>& corr,
+                                               std::vector<int>* tag_of) {
+  const auto& kfs = s.map.keyframes;
+  std::unordered_map<int, int> kf_pos;
+  for (std::size_t i = 0; i < kfs.size(); ++i) kf_pos[kfs[i].id] = static_cast<int>(i);
+  std::vector<map::Correspondence> out;
+  tag_of->clear();
+  for (std::size_t t = 0; t < corr.size(); ++t) {
+    const map::Correspondence& c = corr[t];
+    const int i = kf_pos.at(c.keyframe);
+    const lie::SE3d T_vm = c.T_vk * kfs[i].T_cw;
+    for (int d : {-3, 0, 3}) {
+      const int k = i + d;
+      if (k < 0 || k >= static_cast<int>(kfs.size())) continue;
+      map::Correspondence x = c;
+      x.id = static_cast<int>(out.size());
+      x.keyframe = kfs[k].id;
+      x.T_vk = T_vm * kfs[k].T_cw.inverse();
+      x.inliers = c.inliers - std::abs(d);  // the anchor's own keyframe sees it best
+      out.push_back(x);
+      tag_of->push_back(static_cast<int>(t));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("Geo-tags seen from several keyframes: a wrong one leaves with all its localizations",
+          "[correction][robust]") {
+  const sim::SimulatedSequence s = simulate_02(3, 2500);
+  const auto tags = sim::kitti_correspondences(s, 100);
+  REQUIRE(tags.size() >= 20);
+  // 10 % of the geo-tags off by 50-200 m (one of them among the first four), in every
+  // localization of them.
+  std::vector<int> wrong_tags{2};
+  for (int t = 7; t < static_cast<int>(tags.size()); t += 10) wrong_tags.push_back(t);
+  std::vector<int> tag_of;
+  const auto clean = with_siblings(s, tags, &tag_of);
+  const auto bad = with_siblings(s, shifted(tags, wrong_tags, 50, 200, 17), &tag_of);
+  REQUIRE(clean.size() == bad.size());
+  // And one localization of a correct geo-tag made against the wrong keyframe, 40 keyframes
+  // on (a view matched to another place): its view lands tens of metres off.
+  int misplaced = -1;
+  for (std::size_t j = 0; j < bad.size() && misplaced < 0; ++j)
+    if (tag_of[j] == 12 && bad[j].keyframe != tags[12].keyframe) misplaced = static_cast<int>(j);
+  REQUIRE(misplaced >= 0);
+  auto bad2 = bad;
+  for (std::size_t i = 0; i + 40 < s.map.keyframes.size(); ++i)
+    if (s.map.keyframes[i].id == bad2[misplaced].keyframe) {
+      bad2[misplaced].keyframe = s.map.keyframes[i + 40].id;
+      break;
+    }
+  REQUIRE(bad2[misplaced].keyframe != bad[misplaced].keyframe);
+
+  auto is_wrong = [&](int j) {
+    return std::find(wrong_tags.begin(), wrong_tags.end(), tag_of[j]) != wrong_tags.end();
+  };
+  auto count = [&](const correction::AnchorScreening& sc, int* w, int* r) {
+    *w = *r = 0;
+    for (std::size_t j = 0; j < sc.anchors.size(); ++j)
+      if (static_cast<int>(j) != misplaced)
+        (is_wrong(static_cast<int>(j)) ? *w : *r) += !sc.anchors[j].used;
+  };
+  int num_wrong = 0;
+  for (std::size_t j = 0; j < bad.size(); ++j) num_wrong += is_wrong(static_cast<int>(j));
+
+  // Screened one by one, a wrong geo-tag's localizations vouch for each other.
+  const auto naive = correction::screen_anchors(s.map.keyframes, bad2);
+  REQUIRE(naive.ok);
+  int naive_w = 0, naive_r = 0;
+  count(naive, &naive_w, &naive_r);
+  // By geo-tag, all of them go; so does the misplaced localization, and its geo-tag stays.
+  correction::AnchorScreening sc_clean, sc;
+  auto correct_by_tag = [&](const std::vector<map::Correspondence>& corr,
+                            correction::AnchorScreening* out) {
+    *out = correction::screen_anchors_by_geotag(s.map.keyframes, corr);
+    REQUIRE(out->ok);
+    correction::CorrectorOptions opt;
+    opt.mode = correction::Mode::kInitPgo;
+    correction::Corrector c(opt);
+    correction::apply_screening(*out, corr, &c);
+    correction::replay(s.map, corr, &c);
+    REQUIRE(c.initialized());
+    std::vector<Eigen::Vector3d> est;
+    for (int i = 0; i < c.num_keyframes(); ++i) est.push_back(c.keyframe_center_w(i));
+    return eval::horizontal_errors(est, s.gt_center_w).all.mean;
+  };
+  const double e_clean = correct_by_tag(clean, &sc_clean);
+  const double e_bad = correct_by_tag(bad2, &sc);
+  int w = 0, r = 0;
+  count(sc, &w, &r);
+  int siblings_kept = 0, siblings = 0;
+  for (std::size_t j = 0; j < bad2.size(); ++j)
+    if (tag_of[j] == 12 && static_cast<int>(j) != misplaced) {
+      ++siblings;
+      siblings_kept += sc.anchors[j].used;
+    }
+  INFO("one by one: left out " << naive_w << " of " << num_wrong << " wrong localizations, "
+                               << naive_r << " correct; by geo-tag: " << w << " wrong, " << r
+                               << " correct, misplaced one used " << sc.anchors[misplaced].used
+                               << "; mean 2D error " << e_bad << " m (clean, by geo-tag: "
+                               << e_clean << " m, " << sc_clean.num_left_out() << " left out)");
+  // The test has teeth: one by one, a geo-tag's localizations agree with each other, the drift
+  // level estimated from them is too low, and the stiff path throws out correct ones.
+  CHECK(naive_r > 3 * r);
+  CHECK(w == num_wrong);
+  CHECK(r <= 6);  // two geo-tags' worth
+  CHECK(!sc.anchors[misplaced].used);
+  CHECK(siblings_kept == siblings);
+  CHECK(sc_clean.num_left_out() <= 6);
+  CHECK(e_bad <= 1.2 * e_clean);
+  for (std::size_t j = 0; j < bad2.size(); ++j)
+    if (is_wrong(static_cast<int>(j))) {
+      INFO("localization " << j << ": " << sc.anchors[j].why);
+      CHECK(sc.anchors[j].why.find("geo-tag") != std::string::npos);
+    }
 }
