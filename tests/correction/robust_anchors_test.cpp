@@ -99,10 +99,11 @@ std::vector<map::Correspondence> shifted(std::vector<map::Correspondence> corr,
   return corr;
 }
 
-/// INIT+PGO over the anchors the screening keeps.
+/// INIT+PGO over the anchors the screening keeps (by geo-tag: screen_anchors_by_geotag).
 Run correct_screened(const sim::SimulatedSequence& s, const std::vector<map::Correspondence>& corr,
-                     correction::AnchorScreening* screening) {
-  *screening = correction::screen_anchors(s.map.keyframes, corr);
+                     correction::AnchorScreening* screening, bool by_geotag = false) {
+  *screening = by_geotag ? correction::screen_anchors_by_geotag(s.map.keyframes, corr)
+                         : correction::screen_anchors(s.map.keyframes, corr);
   REQUIRE(screening->ok);
   correction::CorrectorOptions opt;
   opt.mode = correction::Mode::kInitPgo;
@@ -343,22 +344,8 @@ TEST_CASE("Geo-tags seen from several keyframes: a wrong one leaves with all its
   count(naive, &naive_w, &naive_r);
   // By geo-tag, all of them go; so does the misplaced localization, and its geo-tag stays.
   correction::AnchorScreening sc_clean, sc;
-  auto correct_by_tag = [&](const std::vector<map::Correspondence>& corr,
-                            correction::AnchorScreening* out) {
-    *out = correction::screen_anchors_by_geotag(s.map.keyframes, corr);
-    REQUIRE(out->ok);
-    correction::CorrectorOptions opt;
-    opt.mode = correction::Mode::kInitPgo;
-    correction::Corrector c(opt);
-    correction::apply_screening(*out, corr, &c);
-    correction::replay(s.map, corr, &c);
-    REQUIRE(c.initialized());
-    std::vector<Eigen::Vector3d> est;
-    for (int i = 0; i < c.num_keyframes(); ++i) est.push_back(c.keyframe_center_w(i));
-    return eval::horizontal_errors(est, s.gt_center_w).all.mean;
-  };
-  const double e_clean = correct_by_tag(clean, &sc_clean);
-  const double e_bad = correct_by_tag(bad2, &sc);
+  const double e_clean = correct_screened(s, clean, &sc_clean, /*by_geotag=*/true).mean_2d;
+  const double e_bad = correct_screened(s, bad2, &sc, /*by_geotag=*/true).mean_2d;
   int w = 0, r = 0;
   count(sc, &w, &r);
   int siblings_kept = 0, siblings = 0;
