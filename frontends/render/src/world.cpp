@@ -346,7 +346,10 @@ World::World(const std::vector<Eigen::Isometry3d>& T_W_c, const WorldOptions& op
   };
   std::unordered_map<std::int64_t, std::vector<int>> footprint_hash;  // 20 m cells -> buildings
   auto fp_key = [](int ix, int iy) {
-    return (static_cast<std::int64_t>(ix) << 32) ^ static_cast<std::uint32_t>(iy);
+    // Shifted as unsigned (a negative signed left operand is undefined before C++20).
+    return static_cast<std::int64_t>(
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(ix)) << 32) |
+        static_cast<std::uint32_t>(iy));
   };
   auto overlaps_building = [&](const Box& b) {
     const int ix = static_cast<int>(std::floor(b.cx / 20.0)),

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <opencv2/videoio/registry.hpp>
 #include <sstream>
 #include <utility>
 
@@ -224,11 +225,17 @@ class VideoSource final : public FrameSource {
     if (!fs::is_regular_file(path)) throw Error("video file '" + path + "' does not exist");
     // OpenCV logs every backend it tries on an undecodable file; the error below says it once.
     const auto level = cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+    // Only the backends that decode files: with CAP_ANY, OpenCV also offers the name to camera
+    // backends (gphoto2 enumerates every USB device for it, and leaks while doing so).
     bool opened = false;
-    try {
-      opened = cap_.open(path) && cap_.isOpened();
-    } catch (const cv::Exception&) {
-      opened = false;
+    for (const cv::VideoCaptureAPIs api :
+         {cv::CAP_FFMPEG, cv::CAP_GSTREAMER, cv::CAP_OPENCV_MJPEG}) {
+      if (opened || !cv::videoio_registry::hasBackend(api)) continue;
+      try {
+        opened = cap_.open(path, api) && cap_.isOpened();
+      } catch (const cv::Exception&) {
+        opened = false;
+      }
     }
     cv::utils::logging::setLogLevel(level);
     if (!opened) throw Error("cannot open video '" + path + "' (not a video OpenCV can decode)");
