@@ -59,6 +59,10 @@ build options
                      EXIF FocalLengthIn35mmFilm)
   --sift N           RootSIFT features per view (default 1000)
   --orb N            ORB features per view (default 2000)
+  --retrieval-scale S  RootSIFT for retrieval on images resized by S in (0, 1], views and
+                     queries alike (default 0.5: a 2048-px panorama cut to a KITTI-like field of
+                     view is ~2x upsampled, so full resolution adds cost, not detail; use 1 for
+                     panoramas or photos as sharp as the video)
   --branching B      vocabulary tree branching (default 10)
   --depth L          vocabulary tree depth (default 4: up to 10^4 words)
   --train N          descriptors sampled to train the vocabulary (default 200000)
@@ -124,7 +128,7 @@ std::string fmt_time(double s) {
 int run_build(int argc, char** argv) {
   const Args args(argc, argv,
                   {"geotags", "out", "calib", "size", "camera", "photo-hfov-deg", "sift", "orb",
-                   "branching", "depth", "train", "seed"},
+                   "retrieval-scale", "branching", "depth", "train", "seed"},
                   {"help", "force"});
   if (args.flag("help")) {
     std::fputs(kGeotagsHelp, stdout);
@@ -187,6 +191,13 @@ int run_build(int argc, char** argv) {
   o.video_camera = cam;
   o.sift_features = static_cast<int>(args.get_int("sift", 1000));
   o.orb_features = static_cast<int>(args.get_int("orb", 2000));
+  if (args.has("retrieval-scale")) {
+    const std::vector<double> rs =
+        parse_number_list("retrieval-scale", args.get("retrieval-scale"));
+    if (rs.size() != 1 || !(rs[0] > 0 && rs[0] <= 1))
+      throw UsageError("--retrieval-scale must be one number in (0, 1]");
+    o.retrieval_scale = rs[0];
+  }
   o.vocabulary.branching = static_cast<int>(args.get_int("branching", 10));
   o.vocabulary.depth = static_cast<int>(args.get_int("depth", 4));
   o.vocabulary.max_training_descriptors = static_cast<int>(args.get_int("train", 200000));

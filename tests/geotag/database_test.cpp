@@ -2,11 +2,13 @@
 // file format.
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <geodrift/geotag/database.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "support/test_files.hpp"
 
@@ -119,11 +121,27 @@ TEST_CASE("Database on the Lund photos: build, retrieve, gate, save and load",
   for (std::size_t v = 0; v < db.views().size(); ++v) {
     CHECK(back.views()[v].heading == db.views()[v].heading);
     CHECK(back.views()[v].tag.latitude_deg == db.views()[v].tag.latitude_deg);
-    CHECK(back.orb(static_cast<int>(v)).keypoints.size() ==
-          db.orb(static_cast<int>(v)).keypoints.size());
-    CHECK(cv::norm(back.orb(static_cast<int>(v)).descriptors,
-                   db.orb(static_cast<int>(v)).descriptors, cv::NORM_HAMMING) == 0);
+    const geotag::OrbFeatures a = db.orb(static_cast<int>(v)), b = back.orb(static_cast<int>(v));
+    REQUIRE(b.size == a.size);
+    CHECK(a.size > 100);
+    CHECK(cv::norm(b.descriptors, a.descriptors, cv::NORM_HAMMING) == 0);
+    CHECK(std::memcmp(a.keypoints, b.keypoints, sizeof(geotag::StoredKeypoint) * a.size) == 0);
   }
+  CHECK(back.memory_mapped());
+  CHECK_FALSE(db.memory_mapped());
+  CHECK(back.retrieval_scale() == db.retrieval_scale());
+  CHECK_THROWS_AS(back.orb(static_cast<int>(db.views().size())), std::out_of_range);
+  // A copy shares the mapping and outlives the original.
+  std::optional<geotag::Database> copy;
+  {
+    const geotag::Database tmp_db = geotag::Database::load(path);
+    copy = tmp_db;
+  }
+  CHECK(cv::norm(copy->orb(3).descriptors, db.orb(3).descriptors, cv::NORM_HAMMING) == 0);
+  // Saving a loaded (mapped) database writes the same bytes.
+  copy->save(tmp.file("again.gdb"));
+  CHECK(test::read_text(tmp.file("again.gdb")) == test::read_text(path));
+  std::filesystem::remove(tmp.file("again.gdb"));
   const std::vector<geotag::Retrieved> again = back.query(q0, gate);
   REQUIRE(again.size() == near.size());
   for (std::size_t i = 0; i < near.size(); ++i) {
@@ -135,6 +153,25 @@ TEST_CASE("Database on the Lund photos: build, retrieve, gate, save and load",
   const std::string bytes = test::read_text(path);
   test::write_text(tmp.file("cut.gdb"), bytes.substr(0, bytes.size() / 2));
   test::require_io_error([&] { geotag::Database::load(tmp.file("cut.gdb")); }, tmp.file("cut.gdb"));
+  // Cut anywhere in the mapped blocks, a byte appended, an older format version: all refused
+  // before anything is mapped (a mapped file shorter than its tables would fault on access).
+  for (const std::size_t keep : {bytes.size() - 1, bytes.size() - 11, bytes.size() - 5000}) {
+    test::write_text(tmp.file("short.gdb"), bytes.substr(0, keep));
+    test::require_io_error([&] { geotag::Database::load(tmp.file("short.gdb")); },
+                           tmp.file("short.gdb"));
+  }
+  test::write_text(tmp.file("long.gdb"), bytes + "x");
+  test::require_io_error([&] { geotag::Database::load(tmp.file("long.gdb")); },
+                         tmp.file("long.gdb"));
+  std::string v1 = bytes;
+  v1[10] = 1;  // the format version follows the 10-byte magic
+  test::write_text(tmp.file("v1.gdb"), v1);
+  try {
+    geotag::Database::load(tmp.file("v1.gdb"));
+    FAIL("a format-1 database was accepted");
+  } catch (const Error& e) {
+    CHECK(std::string(e.what()).find("rebuild") != std::string::npos);
+  }
   test::write_text(tmp.file("other.gdb"), "hello, world, this is not a database at all");
   test::require_io_error([&] { geotag::Database::load(tmp.file("other.gdb")); },
                          tmp.file("other.gdb"));

@@ -9,8 +9,10 @@
 #include <geodrift/geo/kitti.hpp>
 #include <geodrift/geotag/pipeline.hpp>
 #include <geodrift/lie/sim3.hpp>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 
 #include "support/kitti.hpp"
 #include "support/test_files.hpp"
@@ -258,4 +260,80 @@ TEST_CASE("Pipeline: a keyframe retrieves, matches and localizes the panorama vi
   CHECK(localized_right >= 4);
   WARN("pipeline on the analytic facades: " << localized_right << " views localized, worst "
                                             << max_err << " m, " << max_ang << " deg");
+}
+
+namespace {
+/// The brute-force reference of match_ratio_mutual: OpenCV's BFMatcher (Hamming), k = 2 forward
+/// for the ratio test and 1-NN backward for the mutual check.
+std::set<std::pair<int, int>> reference_matches(const cv::Mat& q, const cv::Mat& t, double ratio) {
+  cv::BFMatcher bf(cv::NORM_HAMMING, false);
+  std::vector<std::vector<cv::DMatch>> fwd;
+  bf.knnMatch(q, t, fwd, 2);
+  std::vector<cv::DMatch> back;
+  bf.match(t, q, back);
+  std::vector<int> best_query(t.rows, -1);
+  for (const cv::DMatch& m : back) best_query[m.queryIdx] = m.trainIdx;
+  std::set<std::pair<int, int>> out;
+  for (const auto& k : fwd) {
+    if (k.empty()) continue;
+    if (k.size() >= 2 && !(k[0].distance < ratio * k[1].distance)) continue;
+    if (best_query[k[0].trainIdx] != k[0].queryIdx) continue;
+    out.insert({k[0].queryIdx, k[0].trainIdx});
+  }
+  return out;
+}
+
+void check_against_reference(const cv::Mat& q, const cv::Mat& t, double ratio,
+                             std::size_t* matches) {
+  const std::vector<cv::DMatch> m = geotag::match_ratio_mutual(q, t, ratio);
+  std::set<std::pair<int, int>> got;
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    got.insert({m[i].queryIdx, m[i].trainIdx});
+    const double d = cv::norm(q.row(m[i].queryIdx), t.row(m[i].trainIdx), cv::NORM_HAMMING);
+    CHECK(m[i].distance == d);
+    if (i > 0) CHECK(m[i - 1].distance <= m[i].distance);
+  }
+  CHECK(got == reference_matches(q, t, ratio));
+  *matches += m.size();
+}
+}  // namespace
+
+TEST_CASE("ORB ratio + mutual matching equals the brute-force matcher, ties included",
+          "[geotag][pipeline]") {
+  // Real ORB descriptors: two Lund photos of one street (many matches) and two far apart (few).
+  const std::vector<std::pair<std::string, std::string>> pairs = {{"01.jpg", "02.jpg"},
+                                                                  {"01.jpg", "20.jpg"}};
+  std::size_t real_matches = 0;
+  for (const auto& [a, b] : pairs) {
+    const cv::Mat ia = cv::imread(kLundImages + a, cv::IMREAD_GRAYSCALE);
+    const cv::Mat ib = cv::imread(kLundImages + b, cv::IMREAD_GRAYSCALE);
+    if (ia.empty() || ib.empty()) {
+      WARN("Lund photos not found under " << kLundImages);
+      break;
+    }
+    const geotag::Features fa = geotag::detect_orb(ia, 1500), fb = geotag::detect_orb(ib, 1500);
+    for (const double ratio : {0.8, 1.0})
+      check_against_reference(fa.descriptors, fb.descriptors, ratio, &real_matches);
+  }
+  INFO(real_matches << " matches on the photos");
+  CHECK((real_matches == 0 || real_matches > 100));
+
+  // Random descriptors of 1 and 5 bytes (ties everywhere; widths not a multiple of 8) and of
+  // 32 bytes with few distinct values, and one train descriptor (no second neighbour).
+  cv::RNG rng(7);
+  std::size_t random_matches = 0;
+  for (const int cols : {1, 5, 32}) {
+    cv::Mat q(300, cols, CV_8U), t(250, cols, CV_8U);
+    rng.fill(q, cv::RNG::UNIFORM, 0, cols == 32 ? 4 : 256);
+    rng.fill(t, cv::RNG::UNIFORM, 0, cols == 32 ? 4 : 256);
+    check_against_reference(q, t, 0.8, &random_matches);
+    check_against_reference(q, t, 1.0, &random_matches);
+    check_against_reference(q, t.rowRange(0, 1), 0.8, &random_matches);
+  }
+  CHECK(random_matches > 0);
+  CHECK(geotag::match_ratio_mutual(cv::Mat(), cv::Mat(5, 32, CV_8U), 0.8).empty());
+  CHECK_THROWS_AS(geotag::match_ratio_mutual(cv::Mat(5, 32, CV_8U), cv::Mat(5, 16, CV_8U), 0.8),
+                  InvalidArgument);
+  CHECK_THROWS_AS(geotag::match_ratio_mutual(cv::Mat(5, 32, CV_8U), cv::Mat(5, 32, CV_8U), 0.0),
+                  InvalidArgument);
 }

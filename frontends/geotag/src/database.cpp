@@ -1,5 +1,8 @@
 #include "geodrift/geotag/database.hpp"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -21,9 +24,20 @@ namespace geodrift::geotag {
 namespace {
 
 constexpr char kMagic[10] = {'G', 'D', 'G', 'E', 'O', 'T', 'A', 'G', 'D', 'B'};
-constexpr std::uint32_t kFormatVersion = 1;
+// 2: retrieval scale after the settings; ORB of all views in two aligned blocks (mapped)
+constexpr std::uint32_t kFormatVersion = 2;
 constexpr std::uint32_t kByteOrderMark = 0x01020304u;
 constexpr std::size_t kCacheSize = 8;
+constexpr int kOrbBytes = 32;            // ORB descriptor width
+constexpr std::int64_t kAlignment = 64;  // of the keypoint and descriptor blocks in the file
+
+std::int64_t align_up(std::int64_t x) { return (x + kAlignment - 1) / kAlignment * kAlignment; }
+
+void pad_to(std::ostream& os, std::int64_t offset) {
+  static const char zeros[kAlignment] = {};
+  const std::int64_t at = static_cast<std::int64_t>(os.tellp());
+  if (at < offset) os.write(zeros, static_cast<std::streamsize>(offset - at));
+}
 
 void write_camera(std::ostream& os, const map::Camera& c) {
   io::write_pod<std::int32_t>(os, c.id);
@@ -65,19 +79,32 @@ cv::Mat to_u8(const cv::Mat& f) {
   return u;
 }
 
+/// The image retrieval extracts RootSIFT from: `gray` resized by `scale` (area averaging).
+cv::Mat retrieval_image(const cv::Mat& gray, double scale) {
+  if (scale == 1.0) return gray;
+  cv::Mat small;
+  const cv::Size size(std::max(1, static_cast<int>(std::lround(gray.cols * scale))),
+                      std::max(1, static_cast<int>(std::lround(gray.rows * scale))));
+  cv::resize(gray, small, size, 0, 0, cv::INTER_AREA);
+  return small;
+}
+
 }  // namespace
 
 Database Database::build(const std::vector<GeoSource>& sources, const BuildOptions& o) {
   GEODRIFT_CHECK(!sources.empty(), "geotag database: no geo-tagged sources given");
   GEODRIFT_CHECK(o.sift_features >= 10, "sift_features " << o.sift_features << " must be >= 10");
   GEODRIFT_CHECK(o.orb_features >= 10, "orb_features " << o.orb_features << " must be >= 10");
+  GEODRIFT_CHECK(o.retrieval_scale > 0 && o.retrieval_scale <= 1,
+                 "retrieval_scale " << o.retrieval_scale << " outside (0, 1]");
   Database db;
+  db.retrieval_scale_ = o.retrieval_scale;
   db.video_camera_ = o.video_camera;
   db.sift_features_ = o.sift_features;
   db.orb_features_ = o.orb_features;
   db.sources_ = sources;
   db.views_ = make_views(sources, o.video_camera);
-  db.orb_.resize(db.views_.size());
+  db.orb_begin_.assign(1, 0);
   std::vector<cv::Mat> sift(db.views_.size());  // CV_8U RootSIFT per view
 
   // Views are grouped by source (make_views() emits them in source order).
@@ -86,13 +113,16 @@ Database Database::build(const std::vector<GeoSource>& sources, const BuildOptio
     const cv::Mat gray = db.source_gray(static_cast<int>(s));
     while (next_view < db.views_.size() && db.views_[next_view].source == static_cast<int>(s)) {
       const GeoView& v = db.views_[next_view];
-      const cv::Mat img =
-          v.direction >= 0
-              ? cut_panorama_view(gray, v.camera,
-                                  v.direction * kViewStepDeg * 3.14159265358979323846 / 180.0)
-              : gray;
-      sift[next_view] = to_u8(detect_root_sift(img, o.sift_features).descriptors);
-      db.orb_[next_view] = detect_orb(img, o.orb_features);
+      const cv::Mat img = db.cut_view(gray, v);
+      sift[next_view] = to_u8(
+          detect_root_sift(retrieval_image(img, o.retrieval_scale), o.sift_features).descriptors);
+      const Features f = detect_orb(img, o.orb_features);
+      GEODRIFT_ASSERT(f.descriptors.cols == kOrbBytes && f.descriptors.isContinuous());
+      for (const cv::KeyPoint& k : f.keypoints)
+        db.orb_keypoints_.push_back({k.pt.x, k.pt.y, k.size, k.angle, k.response, k.octave});
+      db.orb_descriptors_.insert(db.orb_descriptors_.end(), f.descriptors.data,
+                                 f.descriptors.data + f.descriptors.total());
+      db.orb_begin_.push_back(static_cast<std::int64_t>(db.orb_keypoints_.size()));
       ++next_view;
     }
     if (o.progress) o.progress("views", s + 1, sources.size());
@@ -157,17 +187,62 @@ cv::Mat Database::source_gray(int s) const {
   return g;
 }
 
+struct Database::Mapping {
+  void* address = nullptr;
+  std::size_t length = 0;
+  const StoredKeypoint* keypoints = nullptr;
+  const unsigned char* descriptors = nullptr;
+  Mapping() = default;
+  Mapping(const Mapping&) = delete;
+  Mapping& operator=(const Mapping&) = delete;
+  ~Mapping() {
+    if (address) ::munmap(address, length);
+  }
+};
+
+std::vector<cv::KeyPoint> OrbFeatures::cv_keypoints() const {
+  std::vector<cv::KeyPoint> out(static_cast<std::size_t>(size));
+  for (int i = 0; i < size; ++i) {
+    const StoredKeypoint& k = keypoints[i];
+    out[i] = cv::KeyPoint(k.x, k.y, k.size, k.angle, k.response, k.octave);
+  }
+  return out;
+}
+
+OrbFeatures Database::orb(int view) const {
+  if (view < 0 || view + 1 >= static_cast<int>(orb_begin_.size()))
+    throw std::out_of_range("geotag database: no view " + std::to_string(view));
+  const std::int64_t b = orb_begin_[view];
+  const StoredKeypoint* kp = mapping_ ? mapping_->keypoints : orb_keypoints_.data();
+  const unsigned char* d = mapping_ ? mapping_->descriptors : orb_descriptors_.data();
+  OrbFeatures f;
+  f.size = static_cast<int>(orb_begin_[view + 1] - b);
+  f.keypoints = kp + b;
+  // Read-only bytes (PROT_READ when mapped): the Mat header must not be written through.
+  f.descriptors =
+      f.size > 0 ? cv::Mat(f.size, kOrbBytes, CV_8U, const_cast<unsigned char*>(d + b * kOrbBytes))
+                 : cv::Mat(0, kOrbBytes, CV_8U);
+  return f;
+}
+
+cv::Mat Database::cut_view(const cv::Mat& source_gray, const GeoView& v) const {
+  if (v.direction < 0) return source_gray;
+  if (!cutter_ || !cutter_->fits(source_gray.cols, source_gray.rows, v.camera))
+    cutter_.emplace(source_gray.cols, source_gray.rows, v.camera);
+  return cutter_->cut(source_gray, v.direction * kViewStepDeg * 3.14159265358979323846 / 180.0);
+}
+
 cv::Mat Database::view_image(int view) const {
   const GeoView& v = views_.at(view);
-  const cv::Mat g = source_gray(v.source);
-  if (v.direction < 0) return g;
-  return cut_panorama_view(g, v.camera,
-                           v.direction * kViewStepDeg * 3.14159265358979323846 / 180.0);
+  return cut_view(source_gray(v.source), v);
 }
 
 std::vector<Retrieved> Database::query(const cv::Mat& gray, const QueryOptions& o) const {
-  return query_descriptors(
-      detect_root_sift(gray, sift_features_ > 0 ? sift_features_ : 1000).descriptors, o);
+  GEODRIFT_CHECK(!gray.empty(), "geotag query: the image is empty");
+  return query_descriptors(detect_root_sift(retrieval_image(gray, retrieval_scale_),
+                                            sift_features_ > 0 ? sift_features_ : 1000)
+                               .descriptors,
+                           o);
 }
 
 std::vector<Retrieved> Database::query_descriptors(const cv::Mat& d, const QueryOptions& o) const {
@@ -216,6 +291,7 @@ void Database::save(const std::string& path) const {
     io::write_pod(os, kByteOrderMark);
     io::write_pod<std::int32_t>(os, sift_features_);
     io::write_pod<std::int32_t>(os, orb_features_);
+    io::write_pod<double>(os, retrieval_scale_);
     write_camera(os, video_camera_);
     io::write_pod<std::int32_t>(os, static_cast<std::int32_t>(sources_.size()));
     for (const GeoSource& s : sources_) {
@@ -234,14 +310,17 @@ void Database::save(const std::string& path) const {
     }
     vocabulary_.write(os);
     index_.write(os);
-    for (const Features& f : orb_) {
-      io::write_pod<std::int32_t>(os, static_cast<std::int32_t>(f.keypoints.size()));
-      for (const cv::KeyPoint& k : f.keypoints) {
-        for (float x : {k.pt.x, k.pt.y, k.size, k.angle, k.response}) io::write_pod<float>(os, x);
-        io::write_pod<std::int32_t>(os, k.octave);
-      }
-      io::write_mat(os, f.descriptors);
-    }
+    // ORB of all views: the per-view start table, then the keypoint and descriptor blocks at
+    // 64-byte-aligned offsets (load() maps them).
+    for (const std::int64_t b : orb_begin_) io::write_pod<std::int64_t>(os, b);
+    const std::int64_t total = orb_begin_.back();
+    const StoredKeypoint* kp = mapping_ ? mapping_->keypoints : orb_keypoints_.data();
+    const unsigned char* desc = mapping_ ? mapping_->descriptors : orb_descriptors_.data();
+    pad_to(os, align_up(static_cast<std::int64_t>(os.tellp())));
+    os.write(reinterpret_cast<const char*>(kp),
+             static_cast<std::streamsize>(total * sizeof(StoredKeypoint)));
+    pad_to(os, align_up(static_cast<std::int64_t>(os.tellp())));
+    os.write(reinterpret_cast<const char*>(desc), static_cast<std::streamsize>(total * kOrbBytes));
     os.write(kMagic, sizeof kMagic);  // trailer: detects truncation at the very end
     os.flush();
     if (!os) {
@@ -269,12 +348,16 @@ Database Database::load(const std::string& path) {
     const auto version = io::read_pod<std::uint32_t>(is, "version");
     if (version != kFormatVersion)
       throw Error("format version " + std::to_string(version) + ", this build reads " +
-                  std::to_string(kFormatVersion));
+                  std::to_string(kFormatVersion) +
+                  (version < kFormatVersion ? "; rebuild it with `geodrift geotags build`" : ""));
     if (io::read_pod<std::uint32_t>(is, "byte order") != kByteOrderMark)
       throw Error("written on a machine of the other byte order");
     Database db;
     db.sift_features_ = io::read_pod<std::int32_t>(is, "settings");
     db.orb_features_ = io::read_pod<std::int32_t>(is, "settings");
+    db.retrieval_scale_ = io::read_pod<double>(is, "settings");
+    if (!(db.retrieval_scale_ > 0 && db.retrieval_scale_ <= 1))
+      throw Error("corrupt retrieval scale");
     db.video_camera_ = read_camera(is);
     const int ns = io::read_pod<std::int32_t>(is, "source count");
     if (ns < 1 || ns > (1 << 24)) throw Error("corrupt source count");
@@ -304,25 +387,55 @@ Database Database::load(const std::string& path) {
     db.vocabulary_ = Vocabulary::read(is);
     db.index_ = InvertedIndex::read(is);
     if (db.index_.num_documents() != nv) throw Error("index and views disagree");
-    db.orb_.resize(nv);
-    for (Features& f : db.orb_) {
-      const int n = io::read_pod<std::int32_t>(is, "keypoint count");
-      if (n < 0 || n > (1 << 20)) throw Error("corrupt keypoint count");
-      f.keypoints.resize(n);
-      for (cv::KeyPoint& k : f.keypoints) {
-        k.pt.x = io::read_pod<float>(is, "keypoint");
-        k.pt.y = io::read_pod<float>(is, "keypoint");
-        k.size = io::read_pod<float>(is, "keypoint");
-        k.angle = io::read_pod<float>(is, "keypoint");
-        k.response = io::read_pod<float>(is, "keypoint");
-        k.octave = io::read_pod<std::int32_t>(is, "keypoint");
-      }
-      f.descriptors = io::read_mat(is, "ORB descriptors");
-      if (f.descriptors.rows != n) throw Error("keypoints and descriptors disagree");
-    }
+    db.orb_begin_.resize(static_cast<std::size_t>(nv) + 1);
+    for (std::int64_t& b : db.orb_begin_) b = io::read_pod<std::int64_t>(is, "ORB view table");
+    if (db.orb_begin_[0] != 0) throw Error("corrupt ORB view table");
+    for (int v = 0; v < nv; ++v)
+      if (db.orb_begin_[v + 1] < db.orb_begin_[v] ||
+          db.orb_begin_[v + 1] - db.orb_begin_[v] > (1 << 20))
+        throw Error("corrupt ORB view table");
+    const std::int64_t total = db.orb_begin_.back();
+    const std::int64_t kp_at = align_up(static_cast<std::int64_t>(is.tellg()));
+    const std::int64_t desc_at =
+        align_up(kp_at + total * static_cast<std::int64_t>(sizeof(StoredKeypoint)));
+    const std::int64_t trailer_at = desc_at + total * kOrbBytes;
+    is.seekg(0, std::ios::end);
+    const std::int64_t file_size = static_cast<std::int64_t>(is.tellg());
+    if (file_size != trailer_at + static_cast<std::int64_t>(sizeof kMagic))
+      throw Error("file is " + std::to_string(file_size) + " bytes, its tables say " +
+                  std::to_string(trailer_at + static_cast<std::int64_t>(sizeof kMagic)) +
+                  " (truncated or trailing garbage)");
+    is.seekg(trailer_at);
     is.read(magic, sizeof magic);
     if (is.gcount() != sizeof magic || std::memcmp(magic, kMagic, sizeof magic) != 0)
-      throw Error("file is truncated or has trailing garbage before the trailer");
+      throw Error("the trailer is missing (file truncated or overwritten)");
+    // Map the file read-only: the keypoint and descriptor blocks (nearly all of it) are then
+    // pages of the page cache that every process loading this file shares. Where mapping is
+    // not possible, read the blocks instead.
+    auto m = std::make_shared<Mapping>();
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+      void* a = ::mmap(nullptr, static_cast<std::size_t>(file_size), PROT_READ, MAP_SHARED, fd, 0);
+      ::close(fd);
+      if (a != MAP_FAILED) {
+        m->address = a;
+        m->length = static_cast<std::size_t>(file_size);
+        m->keypoints = reinterpret_cast<const StoredKeypoint*>(static_cast<char*>(a) + kp_at);
+        m->descriptors = reinterpret_cast<const unsigned char*>(static_cast<char*>(a) + desc_at);
+        db.mapping_ = std::move(m);
+        return db;
+      }
+    }
+    db.orb_keypoints_.resize(static_cast<std::size_t>(total));
+    db.orb_descriptors_.resize(static_cast<std::size_t>(total) * kOrbBytes);
+    is.clear();
+    is.seekg(kp_at);
+    is.read(reinterpret_cast<char*>(db.orb_keypoints_.data()),
+            static_cast<std::streamsize>(total * sizeof(StoredKeypoint)));
+    is.seekg(desc_at);
+    is.read(reinterpret_cast<char*>(db.orb_descriptors_.data()),
+            static_cast<std::streamsize>(total * kOrbBytes));
+    if (!is) throw Error("cannot read the ORB blocks");
     return db;
   } catch (const Error& e) {  // InvalidArgument included
     throw Error("geotag database '" + path + "': " + e.what());

@@ -54,6 +54,40 @@ cv::Mat cut_panorama_view(const cv::Mat& pano, const map::Camera& view, double o
   return out;
 }
 
+PanoramaCutter::PanoramaCutter(int pano_width, int pano_height, const map::Camera& view)
+    : width_(pano_width), height_(pano_height), view_(view) {
+  panorama_view_maps(pano_width, pano_height, view, 0.0, &map_x_, &map_y_);
+}
+
+bool PanoramaCutter::fits(int pano_width, int pano_height, const map::Camera& view) const {
+  return pano_width == width_ && pano_height == height_ && view.width == view_.width &&
+         view.height == view_.height && view.fx == view_.fx && view.fy == view_.fy &&
+         view.cx == view_.cx && view.cy == view_.cy;
+}
+
+cv::Mat PanoramaCutter::cut(const cv::Mat& pano, double offset) const {
+  GEODRIFT_CHECK(!pano.empty(), "PanoramaCutter: the panorama image is empty");
+  GEODRIFT_CHECK(pano.cols == width_ && pano.rows == height_,
+                 "PanoramaCutter: panorama " << pano.cols << "x" << pano.rows << ", made for "
+                                             << width_ << "x" << height_);
+  GEODRIFT_CHECK(std::isfinite(offset), "panorama view offset " << offset << " is not finite");
+  const double W = width_;
+  double shift = std::fmod(W * offset / (2.0 * kPi), W);
+  if (shift < 0) shift += W;
+  // Table columns lie in [0, W) and shift in [0, W): one subtraction wraps the sum.
+  cv::Mat mx(map_x_.size(), CV_32FC1), out;
+  for (int y = 0; y < mx.rows; ++y) {
+    const float* src = map_x_.ptr<float>(y);
+    float* dst = mx.ptr<float>(y);
+    for (int x = 0; x < mx.cols; ++x) {
+      const double u = src[x] + shift;
+      dst[x] = static_cast<float>(u < W ? u : u - W);
+    }
+  }
+  cv::remap(pano, out, mx, map_y_, cv::INTER_LINEAR, cv::BORDER_WRAP);
+  return out;
+}
+
 cv::Vec3d panorama_pixel_direction(double u, double v, int pano_width, int pano_height,
                                    double heading) {
   const double bearing = heading + 2.0 * kPi * ((u + 0.5) / pano_width - 0.5);

@@ -69,16 +69,28 @@ bool GeoLocalizer::have_kvld() const {
 #endif
 }
 
-std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf, int view,
-                                                     ViewAttempt* a) {
-  const Features& vf = db_.orb(view);
+std::vector<cv::DMatch> GeoLocalizer::putative(const KeyframeFeatures& kf, int view,
+                                               ViewAttempt* a) {
   const double c0 = thread_cpu_s();
-  std::vector<cv::DMatch> m = match_ratio_mutual(kf.descriptors, vf.descriptors, options_.ratio);
-  const double c1 = thread_cpu_s();
-  stats_.orb_match_cpu_s += c1 - c0;
+  std::vector<cv::DMatch> m =
+      match_ratio_mutual(kf.descriptors, db_.orb(view).descriptors, options_.ratio);
+  stats_.orb_match_cpu_s += thread_cpu_s() - c0;
   if (options_.max_putative > 0 && static_cast<int>(m.size()) > options_.max_putative)
     m.resize(options_.max_putative);  // sorted by distance: the best are kept
   a->putative = static_cast<int>(m.size());
+  return m;
+}
+
+std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf, int view,
+                                                     ViewAttempt* a) {
+  return filter(kf, view, putative(kf, view, a), a);
+}
+
+std::vector<std::pair<int, int>> GeoLocalizer::filter(const KeyframeFeatures& kf, int view,
+                                                      const std::vector<cv::DMatch>& m,
+                                                      ViewAttempt* a) {
+  const OrbFeatures vf = db_.orb(view);
+  const double c1 = thread_cpu_s();
   std::vector<std::pair<int, int>> out;
 #if defined(GEODRIFT_GEOTAG_HAVE_KVLD)
   if (options_.use_kvld && !m.empty()) {
@@ -92,7 +104,7 @@ std::vector<std::pair<int, int>> GeoLocalizer::match(const KeyframeFeatures& kf,
     for (const cv::DMatch& d : m) put.push_back({d.queryIdx, d.trainIdx});
     const kvld::Result r =
         kvld::filter(*cache_->keyframe_scale, *vs, kvld::keypoints_from_cv(kf.keypoints),
-                     kvld::keypoints_from_cv(vf.keypoints), put);
+                     kvld::keypoints_from_cv(vf.cv_keypoints()), put);
     for (const kvld::Match& k : r.matches) out.push_back({k.i1, k.i2});
     a->kept = static_cast<int>(out.size());
     stats_.kvld_cpu_s += thread_cpu_s() - c1;
@@ -140,20 +152,39 @@ std::vector<map::Correspondence> GeoLocalizer::process(
     a.keyframe = kf.keyframe.id;
     a.view = r.view;
     a.score = r.score;
-    const std::vector<std::pair<int, int>> m = match(kf, r.view, &a);
+    ++stats_.views_tried;
+    const std::vector<cv::DMatch> put = putative(kf, r.view, &a);
+    // K-VLD only removes matches, and a view is accepted only with at least
+    // max(min_correspondences, min_inliers) 2D-3D pairs: when fewer putative matches observe a
+    // map point, the outcome is known without K-VLD (most tried views end here).
+    const int needed =
+        std::max(options_.localize.min_correspondences, options_.localize.min_inliers);
+    int putative_3d = 0;
+    for (const cv::DMatch& d : put) {
+      const int pid = kf.point_ids[d.queryIdx];
+      putative_3d += pid >= 0 && point_position(pid) != nullptr ? 1 : 0;
+    }
+    if (putative_3d < needed) {
+      a.result.correspondences = putative_3d;
+      a.result.reason = std::to_string(putative_3d) +
+                        " putative matches observe a map point, need " + std::to_string(needed) +
+                        " (K-VLD and PnP skipped)";
+      if (attempts) attempts->push_back(std::move(a));
+      continue;
+    }
+    const std::vector<std::pair<int, int>> m = filter(kf, r.view, put, &a);
     std::vector<Eigen::Vector3d> X;
     std::vector<Eigen::Vector2d> uv;
-    const Features& vf = db_.orb(r.view);
+    const OrbFeatures vf = db_.orb(r.view);
     for (const auto& [ik, iv] : m) {
       const int pid = kf.point_ids[ik];
       if (pid < 0) continue;
       const Eigen::Vector3d* p = point_position(pid);
       if (!p) continue;
       X.push_back(*p);
-      uv.push_back({vf.keypoints[iv].pt.x, vf.keypoints[iv].pt.y});
+      uv.push_back({vf.keypoints[iv].x, vf.keypoints[iv].y});
     }
     a.pairs_3d = static_cast<int>(X.size());
-    ++stats_.views_tried;
     const double cp = thread_cpu_s();
     a.result = localize_view(X, uv, db_.views()[r.view].camera, options_.localize);
     if (a.result.inliers > 0 && db_.views()[r.view].direction >= 0) {

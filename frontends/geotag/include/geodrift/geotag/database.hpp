@@ -7,15 +7,21 @@
 /// saved to one binary file, loaded in well under a second per thousand views.
 ///
 /// File format (Database::save): "GDGEOTAGDB" magic, format version, byte-order mark, the build
-/// settings, the video camera, sources (paths, geo-tags, kinds, photo intrinsics), views, the
-/// vocabulary tree, the inverted file and the ORB keypoints + descriptors of every view. Images
-/// are NOT copied: views are re-cut from their source files on demand (view_image()), so the
-/// sources must stay where they were at build time (their absolute paths are stored).
+/// settings (version 2 adds the retrieval scale; version 1 files are refused: rebuild them), the
+/// video camera, sources (paths, geo-tags, kinds, photo intrinsics), views, the vocabulary tree,
+/// the inverted file and the ORB keypoints + descriptors of every view (version 2: one
+/// 64-byte-aligned block of 24-byte keypoint records and one of 32-byte descriptors for all views,
+/// which load() maps read-only instead of reading, so several processes using one database share
+/// those pages: nearly all of its size). Images are NOT copied: views are re-cut from their source
+/// files on demand (view_image()), so the sources must stay where they were at build time (their
+/// absolute paths are stored).
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <list>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
@@ -24,6 +30,7 @@
 
 #include "geodrift/geo/local_frame.hpp"
 #include "geodrift/geotag/features.hpp"
+#include "geodrift/geotag/panorama.hpp"
 #include "geodrift/geotag/views.hpp"
 #include "geodrift/geotag/vocabulary.hpp"
 #include "geodrift/map/camera.hpp"
@@ -32,6 +39,24 @@ namespace geodrift::geotag {
 
 /// Progress report: stage name, items done, items in this stage.
 using ProgressFn = std::function<void(const char* stage, std::size_t done, std::size_t total)>;
+
+/// A keypoint as the database stores it (24 bytes, the file's record): pixels of the view,
+/// OpenCV's conventions (x right, y down, angle in degrees, octave = pyramid level).
+struct StoredKeypoint {
+  float x, y, size, angle, response;
+  std::int32_t octave;
+};
+static_assert(sizeof(StoredKeypoint) == 24, "StoredKeypoint is the file's 24-byte record");
+
+/// One view's ORB features without a copy: pointers into the database's memory (the
+/// read-only memory-mapped file of a loaded database), valid while the Database lives.
+struct OrbFeatures {
+  const StoredKeypoint* keypoints = nullptr;
+  int size = 0;
+  cv::Mat descriptors;  ///< CV_8U x 32, size rows; a header over the database's bytes
+  /// The keypoints as cv::KeyPoint (a copy).
+  std::vector<cv::KeyPoint> cv_keypoints() const;
+};
 
 /// One retrieval result.
 struct Retrieved {
@@ -56,7 +81,14 @@ class Database {
     /// view as the input video").
     map::Camera video_camera;
     int sift_features = 1000;  ///< RootSIFT features per view (retrieval)
-    int orb_features = 2000;   ///< ORB features per view (matching)
+    /// Retrieval runs RootSIFT on the image resized by this factor, views and queries alike
+    /// (stored in the database; queries use the database's). 0.5 skips the octave at the video's
+    /// full resolution, which a panorama cut to the video's field of view does not have: a
+    /// 2048-px panorama holds 5.7 px/deg, a KITTI view (fx 718) 12.5 px/deg at its centre, so
+    /// the view is the panorama upsampled about 2x. Costs a quarter of full resolution's SIFT.
+    /// In (0, 1]; 1 = full resolution (what databases of format 1 used).
+    double retrieval_scale = 0.5;
+    int orb_features = 2000;  ///< ORB features per view (matching)
     Vocabulary::Options vocabulary;
     ProgressFn progress;  ///< may be empty
   };
@@ -79,14 +111,21 @@ class Database {
   const map::Camera& video_camera() const { return video_camera_; }
   const Vocabulary& vocabulary() const { return vocabulary_; }
   const InvertedIndex& index() const { return index_; }
-  /// The view's precomputed ORB features (keypoints in view pixels).
-  const Features& orb(int view) const { return orb_.at(view); }
+  /// BuildOptions::retrieval_scale of this database.
+  double retrieval_scale() const { return retrieval_scale_; }
+  /// The view's precomputed ORB features (keypoints in view pixels), without a copy.
+  /// @throws std::out_of_range for a view that does not exist.
+  OrbFeatures orb(int view) const;
+  /// True when the ORB features are read from the file through a read-only memory map (a
+  /// loaded database): processes that load the same file share those pages.
+  bool memory_mapped() const { return static_cast<bool>(mapping_); }
 
-  /// Top-k views for a grayscale query image (RootSIFT -> words -> tf-idf -> cosine), best
-  /// first, with the optional distance gate. Views scoring 0 are never returned.
+  /// Top-k views for a grayscale query image (resized by retrieval_scale() -> RootSIFT ->
+  /// words -> tf-idf -> cosine), best first, with the optional distance gate. Views scoring 0
+  /// are never returned.
   /// @throws InvalidArgument for an empty image or a gate without a frame.
   std::vector<Retrieved> query(const cv::Mat& gray, const QueryOptions& options) const;
-  /// The same from the query's RootSIFT descriptors.
+  /// The same from the query's RootSIFT descriptors (of the image at retrieval_scale()).
   std::vector<Retrieved> query_descriptors(const cv::Mat& root_sift,
                                            const QueryOptions& options) const;
 
@@ -97,15 +136,26 @@ class Database {
 
  private:
   cv::Mat source_gray(int source) const;
+  /// View v of its source's grey image (the panorama cut, or the photo itself).
+  cv::Mat cut_view(const cv::Mat& source_gray, const GeoView& v) const;
 
   map::Camera video_camera_;
   int sift_features_ = 0, orb_features_ = 0;
+  double retrieval_scale_ = 1.0;
   std::vector<GeoSource> sources_;
   std::vector<GeoView> views_;
   Vocabulary vocabulary_;
   InvertedIndex index_;
-  std::vector<Features> orb_;
+  // ORB features of all views, back to back: view v owns keypoints / descriptor rows
+  // [orb_begin_[v], orb_begin_[v + 1]). They live in orb_keypoints_ / orb_descriptors_ for a
+  // built database and in the mapped file (mapping_, shared by copies) for a loaded one.
+  std::vector<std::int64_t> orb_begin_;
+  std::vector<StoredKeypoint> orb_keypoints_;
+  std::vector<unsigned char> orb_descriptors_;
+  struct Mapping;
+  std::shared_ptr<const Mapping> mapping_;
   mutable std::list<std::pair<int, cv::Mat>> cache_;  ///< (source, gray image), most recent first
+  mutable std::optional<PanoramaCutter> cutter_;      ///< remap tables of the last panorama size
 };
 
 }  // namespace geodrift::geotag

@@ -48,6 +48,26 @@ void panorama_view_maps(int pano_width, int pano_height, const map::Camera& view
 /// @throws InvalidArgument for an empty panorama and as panorama_view_maps().
 cv::Mat cut_panorama_view(const cv::Mat& pano, const map::Camera& view, double offset);
 
+/// Cuts views of one panorama size with one view camera, the remap tables computed once: the
+/// view at offset o samples the rows of the view at offset 0 and its columns shifted by
+/// W * o / (2 pi) (the bearing of every view pixel grows by o, its elevation is unchanged), so
+/// a view costs the remap only. Equal to cut_panorama_view() up to float rounding of the tables.
+class PanoramaCutter {
+ public:
+  /// @throws InvalidArgument as panorama_view_maps().
+  PanoramaCutter(int pano_width, int pano_height, const map::Camera& view);
+  /// True when this cutter was made for that panorama size and view camera.
+  bool fits(int pano_width, int pano_height, const map::Camera& view) const;
+  /// The view at `offset` (radians, as cut_panorama_view()).
+  /// @throws InvalidArgument for a panorama of another size or a non-finite offset.
+  cv::Mat cut(const cv::Mat& pano, double offset) const;
+
+ private:
+  int width_, height_;
+  map::Camera view_;
+  cv::Mat map_x_, map_y_;  ///< offset 0
+};
+
 /// The unit direction, in the panorama's (east, north, up) frame, of the panorama pixel centre
 /// (u, v) (continuous coordinates; pixel centres at integers). Tests and the renderer's checks.
 cv::Vec3d panorama_pixel_direction(double u, double v, int pano_width, int pano_height,

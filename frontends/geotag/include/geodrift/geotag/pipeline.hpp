@@ -10,7 +10,9 @@
 ///     --PnP RANSAC + LM (localize_view)--> view pose in M --> map::Correspondence.
 ///
 /// A view that localized once is not tried again (option), so one geo view gives one
-/// correspondence. Every attempt is reported (ViewAttempt) for diagnostics.
+/// correspondence. A view whose putative matches hold fewer keyframe keypoints with a map point
+/// than acceptance needs (max(min_correspondences, min_inliers)) skips K-VLD and PnP: K-VLD only
+/// removes matches, so the attempt could not succeed. Every attempt is reported (ViewAttempt).
 
 #include <Eigen/Core>
 #include <functional>
@@ -92,7 +94,7 @@ struct ViewAttempt {
   int view = -1;
   float score = 0;
   int putative = 0;  ///< ratio + mutual ORB matches
-  int kept = 0;      ///< after K-VLD (= putative when K-VLD is off)
+  int kept = 0;      ///< after K-VLD (= putative when K-VLD is off; 0 when it was skipped)
   int pairs_3d = 0;  ///< kept matches with a map point
   LocalizeResult result;
   /// Angle (deg) between the view's and the keyframe's down axes for the PnP estimate (NaN
@@ -131,6 +133,13 @@ class GeoLocalizer {
   const PipelineStats& stats() const { return stats_; }
 
  private:
+  /// Ratio + mutual ORB matches, capped at max_putative (best first).
+  std::vector<cv::DMatch> putative(const KeyframeFeatures& kf, int view, ViewAttempt* attempt);
+  /// K-VLD (when enabled) over putative matches, as (keyframe, view) keypoint index pairs.
+  std::vector<std::pair<int, int>> filter(const KeyframeFeatures& kf, int view,
+                                          const std::vector<cv::DMatch>& putative,
+                                          ViewAttempt* attempt);
+
   struct Cache;
   const Database& db_;
   geo::LocalFrame frame_;
