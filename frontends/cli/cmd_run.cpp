@@ -69,6 +69,10 @@ inputs
                       (default 1: every keyframe; keyframes are ~1 m apart on a car, geo-tags
                       often 5 m or more)
   --geotag-top-k K    views tried per keyframe once the gate is active (default 5)
+  --no-geotag-direction-gate  after INIT, also try retrieved views that look away from the
+                      keyframe. By default a view whose heading differs from the keyframe's
+                      corrected heading by more than half the sum of the two horizontal
+                      fields of view (frusta disjoint at infinity) is not matched
   --no-screen-anchors use every localized view as it comes. By default, once the video is
                       done, each geo-tag is tested against all the others along the VO path
                       (one localization per geo-tag first, then every localization of the
@@ -117,7 +121,7 @@ int run_run(int argc, char** argv) {
       argc, argv,
       {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every", "geotag-top-k",
        "photo-hfov-deg", "fps", "max-frames", "features", "threads", "out"},
-      {"help", "force", "no-screen-anchors"});
+      {"help", "force", "no-screen-anchors", "no-geotag-direction-gate"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
     return 0;
@@ -235,6 +239,7 @@ int run_run(int argc, char** argv) {
     if (gate_m > 0) po.gate_radius_m = gate_m;
     po.keyframe_stride = static_cast<int>(geo_every);
     po.top_k_gated = static_cast<int>(geo_top_k);
+    po.gate_view_direction = !args.flag("no-geotag-direction-gate");
     geo_loc = std::make_unique<geotag::GeoLocalizer>(*geo_db, geo_frame, po);
   }
   std::unordered_map<int, Eigen::Vector3d> geo_points;  // final map points, M
@@ -276,8 +281,11 @@ int run_run(int argc, char** argv) {
         Eigen::Vector3d estimate;
         const Eigen::Vector3d* est = nullptr;
         if (corrector.initialized()) {
-          estimate = corrector.keyframe_center_w(corrector.keyframe_index(b.keyframe.id));
+          const int ki = corrector.keyframe_index(b.keyframe.id);
+          estimate = corrector.keyframe_center_w(ki);
           est = &estimate;
+          kf.optical_axis_w =
+              corrector.keyframe_pose_w(ki).rotation().inverse().act(Eigen::Vector3d::UnitZ());
         }
         std::vector<geotag::ViewAttempt> attempts;
         const std::vector<map::Correspondence> cs = geo_loc->process(
@@ -560,6 +568,7 @@ int run_run(int argc, char** argv) {
         << ", \"localization_seconds\": " << json_num(geo_s) << ", \"every\": " << geo_every
         << ", \"top_k_gated\": " << geo_top_k
         << ", \"keyframes_queried\": " << geo_loc->stats().keyframes_queried
+        << ", \"views_skipped_direction\": " << geo_loc->stats().views_skipped_direction
         << ", \"cpu_seconds\": {\"retrieval\": " << json_num(geo_loc->stats().retrieval_cpu_s)
         << ", \"orb_matching\": " << json_num(geo_loc->stats().orb_match_cpu_s)
         << ", \"kvld\": " << json_num(geo_loc->stats().kvld_cpu_s)

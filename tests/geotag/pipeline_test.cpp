@@ -255,6 +255,32 @@ TEST_CASE("Pipeline: a keyframe retrieves, matches and localizes the panorama vi
     po.keyframe_stride = 0;
     CHECK_THROWS_AS(geotag::GeoLocalizer(db, frame, po), InvalidArgument);
   }
+  {
+    // View direction gate: with the keyframe's true axis nothing that localized is skipped;
+    // with the axis reversed, the views facing the facade are skipped and nothing localizes.
+    for (int i = 0; i < 4; ++i) {
+      const auto pos = [&](int id) { return &all_points[i].at(id); };
+      geotag::GeoLocalizer plain(db, frame, {});
+      const std::size_t n_plain = plain.process(all_kf[i], pos).size();
+      geotag::KeyframeFeatures kf = all_kf[i];
+      const Eigen::Vector3d axis_m =
+          kf.keyframe.T_cw.rotation().inverse().act(Eigen::Vector3d::UnitZ());
+      const Eigen::Vector3d axis_w = S_mw.rotation().inverse().act(axis_m);
+      kf.optical_axis_w = axis_w;
+      geotag::GeoLocalizer ahead(db, frame, {});
+      CHECK(ahead.process(kf, pos).size() == n_plain);
+      kf.optical_axis_w = -axis_w;
+      geotag::GeoLocalizer behind(db, frame, {});
+      CHECK(behind.process(kf, pos).empty());
+      CHECK(behind.stats().views_skipped_direction > 0);
+      geotag::PipelineOptions off;
+      off.gate_view_direction = false;
+      geotag::GeoLocalizer ungated(db, frame, off);
+      CHECK(ungated.process(kf, pos).size() == n_plain);
+      CHECK(ungated.stats().views_skipped_direction == 0);
+      CHECK(n_plain >= 1);
+    }
+  }
   // Each keyframe localizes at least the panorama view facing its facade.
   INFO("worst centre error " << max_err << " m, worst rotation " << max_ang << " deg");
   CHECK(localized_right >= 4);

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <limits>
 #include <list>
 
 #include "geodrift/error.hpp"
@@ -16,6 +17,20 @@
 namespace geodrift::geotag {
 
 namespace {
+/// Horizontal field of view of a pinhole camera (rad): the wider side of the principal point.
+double horizontal_fov(const map::Camera& c) {
+  return std::atan(c.cx / c.fx) + std::atan((c.width - c.cx) / c.fx);
+}
+
+/// Angle (rad) between the horizontal projections of two directions in W; NaN when either is
+/// (nearly) vertical.
+double horizontal_angle(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  const Eigen::Vector2d ha = a.head<2>(), hb = b.head<2>();
+  if (ha.norm() < 1e-3 * a.norm() || hb.norm() < 1e-3 * b.norm())
+    return std::numeric_limits<double>::quiet_NaN();
+  return std::acos(std::clamp(ha.normalized().dot(hb.normalized()), -1.0, 1.0));
+}
+
 double thread_cpu_s() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -148,6 +163,16 @@ std::vector<map::Correspondence> GeoLocalizer::process(
       break;
     if (r.score < options_.min_retrieval_score) continue;
     if (options_.localize_each_view_once && localized_.count(r.view)) continue;
+    const GeoView& view = db_.views()[r.view];
+    if (options_.gate_view_direction && kf.optical_axis_w && std::isfinite(view.heading)) {
+      const Eigen::Vector3d axis_v =
+          view_pose_world(view, frame_).rotation().inverse().act(Eigen::Vector3d::UnitZ());
+      const double limit = 0.5 * (horizontal_fov(view.camera) + horizontal_fov(db_.video_camera()));
+      if (horizontal_angle(axis_v, *kf.optical_axis_w) > limit) {
+        ++stats_.views_skipped_direction;
+        continue;
+      }
+    }
     ViewAttempt a;
     a.keyframe = kf.keyframe.id;
     a.view = r.view;

@@ -20,6 +20,7 @@
 #include <map>
 #include <memory>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -41,6 +42,9 @@ struct KeyframeFeatures {
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;         ///< ORB, CV_8U x 32, one row per keypoint
   std::vector<int> point_ids;  ///< same size as keypoints
+  /// The keyframe's optical axis in W (unit), when known (after INIT): enables the view
+  /// direction gate (PipelineOptions::gate_view_direction).
+  std::optional<Eigen::Vector3d> optical_axis_w;
 };
 
 struct PipelineOptions {
@@ -70,6 +74,12 @@ struct PipelineOptions {
   /// - max_localized_per_keyframe: stop trying views of a keyframe once this many localized
   ///   (0 = try all top-k).
   int keyframe_stride = 1;
+  /// Skip a retrieved view (no matching) whose horizontal viewing direction differs from the
+  /// keyframe's (KeyframeFeatures::optical_axis_w) by more than half the sum of the two
+  /// horizontal fields of view: their frusta are then disjoint at infinity and share at most
+  /// nearby objects at the edges. On the rendered 1,050 m stretch of 02, none of 244 such
+  /// attempts localized (all 110 localized views were within 67.5 deg; KITTI's field is 81 deg).
+  bool gate_view_direction = true;
   int top_k_gated = 0;
   int max_localized_per_keyframe = 0;
 };
@@ -80,10 +90,11 @@ struct PipelineStats {
   int keyframes_seen = 0;     ///< process() calls
   int keyframes_queried = 0;  ///< of those, not skipped by keyframe_stride
   int views_tried = 0;
-  double retrieval_cpu_s = 0;  ///< RootSIFT on the keyframe + vocabulary + tf-idf scoring
-  double orb_match_cpu_s = 0;  ///< ratio + mutual ORB matching
-  double kvld_cpu_s = 0;       ///< K-VLD incl. scale spaces of keyframe and view images
-  double pnp_cpu_s = 0;        ///< PnP RANSAC + LM (+ tilt check)
+  int views_skipped_direction = 0;  ///< retrieved but skipped by gate_view_direction
+  double retrieval_cpu_s = 0;       ///< RootSIFT on the keyframe + vocabulary + tf-idf scoring
+  double orb_match_cpu_s = 0;       ///< ratio + mutual ORB matching
+  double kvld_cpu_s = 0;            ///< K-VLD incl. scale spaces of keyframe and view images
+  double pnp_cpu_s = 0;             ///< PnP RANSAC + LM (+ tilt check)
   double total_cpu_s = 0;
   double total_wall_s = 0;
 };
