@@ -19,6 +19,7 @@ BENCHMARKS.md section):
   correction.json           bench_correction
   vo.json                   bench_vo
   kvld.json                 bench_kvld
+  geotag.json               bench_geotag
   render.json               bench_render
 
 A missing file leaves its block as it is (with --write) and is reported on stderr. Where a case
@@ -294,6 +295,33 @@ def t_kvld(results):
                  [r[1] for r in rows]) + ["", run_line(ctx, path)]
 
 
+def t_geotag(results):
+    path = os.path.join(results, "geotag.json")
+    if not os.path.exists(path):
+        return None
+    ctx, bench = load(path)
+    pairs = [("putative ORB matching, 2,000 × 2,000 (ratio 0.8 + mutual)", "BM_Match_Ours",
+              "BM_Match_BFMatcherPeer", "OpenCV BFMatcher knn + reverse match", "matches"),
+             ("RootSIFT for retrieval, one 1241×376 image", "BM_RootSift/50", "BM_RootSift/100",
+              "full resolution (retrieval_scale 1)", "features"),
+             ("one view cut from a 2048×1024 panorama", "BM_CutView_Cutter", "BM_CutView_PerView",
+              "cut_panorama_view (tables per view)", None)]
+    rows = []
+    for label, ours, peer, peer_label, counter in pairs:
+        a, b = bench.get(ours), bench.get(peer)
+        if not a or not b:
+            continue
+        counts = (f"{c(a, counter):,.0f} / {c(b, counter):,.0f}" if counter else "–")
+        rows.append([label, f"**{ms(c(a, 'cpu_time'))}**", peer_label, ms(c(b, "cpu_time")),
+                     f"**{c(b, 'cpu_time') / c(a, 'cpu_time'):.1f}×**", counts])
+    orb = bench.get("BM_Orb_2000")
+    if orb:
+        rows.append(["reference: ORB detect + compute, 2,000 features, same image",
+                     ms(c(orb, "cpu_time")), "–", "–", "–", "–"])
+    return table(["step", "ours [ms CPU]", "peer / previous method", "peer [ms CPU]",
+                  "speed-up", "counts (ours / peer)"], rows) + ["", run_line(ctx, path)]
+
+
 def t_render(results):
     path = os.path.join(results, "render.json")
     if not os.path.exists(path):
@@ -330,6 +358,7 @@ TABLES = {
     "correction": t_correction,
     "vo": t_vo,
     "kvld": t_kvld,
+    "geotag": t_geotag,
     "render": t_render,
 }
 

@@ -7,7 +7,8 @@
 # fails and this script exits non-zero. Leaks are reported by LeakSanitizer at exit.
 #   scripts/sanitize.sh            build into build-asan/ and run everything
 #   GEODRIFT_SANITIZE_JOBS=1 ...   ctest parallelism (default: nproc)
-# Takes about 40 min on 2 cores from a cold ccache (docs/building.md has the measured figures).
+# On 2 cores: about 2 h to build from a cold ccache, then 29 min of tests and commands
+# (docs/building.md has the measured figures).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
