@@ -18,20 +18,15 @@
 
 #include "geodrift/geotag/features.hpp"
 #include "geodrift/geotag/panorama.hpp"
+#include "support/kitti.hpp"
+#include "support/kitti_images.hpp"
 
 namespace {
 
 namespace geotag = geodrift::geotag;
+namespace bench = geodrift::bench;
 
-cv::Mat load_kitti_sized(const std::string& path) {
-  const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
-  if (img.empty()) return img;
-  cv::Mat small;
-  const double s = 1241.0 / img.cols;
-  cv::resize(img, small, cv::Size(), s, s, cv::INTER_AREA);
-  const int y0 = std::max(0, (small.rows - 376) / 2);
-  return small(cv::Rect(0, y0, small.cols, std::min(376, small.rows))).clone();
-}
+using bench::load_kitti_sized;
 
 struct Scene {
   cv::Mat img1, img2, pano;
@@ -52,16 +47,6 @@ const Scene* scene() {
     return s;
   }();
   return sc.get();
-}
-
-geodrift::map::Camera kitti_camera() {
-  geodrift::map::Camera c;
-  c.fx = c.fy = 718.856;
-  c.cx = 607.1928;
-  c.cy = 185.2157;
-  c.width = 1241;
-  c.height = 376;
-  return c;
 }
 
 #define GEODRIFT_BENCH_SCENE(sc)                                                    \
@@ -133,7 +118,7 @@ BENCHMARK(BM_Orb_2000)->Unit(benchmark::kMillisecond);
 
 void BM_CutView_Cutter(benchmark::State& state) {
   GEODRIFT_BENCH_SCENE(sc);
-  const geotag::PanoramaCutter cutter(sc->pano.cols, sc->pano.rows, kitti_camera());
+  const geotag::PanoramaCutter cutter(sc->pano.cols, sc->pano.rows, geodrift::test::kitti_camera());
   int k = 0;
   for (auto _ : state) {
     const cv::Mat v = cutter.cut(sc->pano, (k++ % 8) * 3.14159265358979323846 / 4.0);
@@ -146,7 +131,7 @@ void BM_CutView_PerView(benchmark::State& state) {
   GEODRIFT_BENCH_SCENE(sc);
   int k = 0;
   for (auto _ : state) {
-    const cv::Mat v = geotag::cut_panorama_view(sc->pano, kitti_camera(),
+    const cv::Mat v = geotag::cut_panorama_view(sc->pano, geodrift::test::kitti_camera(),
                                                 (k++ % 8) * 3.14159265358979323846 / 4.0);
     benchmark::DoNotOptimize(v.data);
   }

@@ -16,20 +16,14 @@
 #include <string>
 
 #include "geodrift/kvld/kvld.hpp"
+#include "support/kitti_images.hpp"
 
 namespace {
 
 namespace kvld = geodrift::kvld;
+namespace bench = geodrift::bench;
 
-cv::Mat load_kitti_sized(const std::string& path) {
-  const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
-  if (img.empty()) return img;
-  cv::Mat small;
-  const double s = 1241.0 / img.cols;
-  cv::resize(img, small, cv::Size(), s, s, cv::INTER_AREA);
-  const int y0 = std::max(0, (small.rows - 376) / 2);
-  return small(cv::Rect(0, y0, small.cols, std::min(376, small.rows))).clone();
-}
+using bench::load_kitti_sized;
 
 struct Scene {
   cv::Mat img1, img2;

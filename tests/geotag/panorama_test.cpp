@@ -31,6 +31,23 @@ cv::Mat analytic_panorama(int W, int H) {
     }
   return p;
 }
+/// Largest difference (grey levels, every 7th pixel) between `view` and the radiance along its
+/// pixels' rays, for a level camera whose axis has bearing `offset` relative to the heading.
+/// Independent ray: the core's level_camera_rotation in a frame with x = east', y = north'
+/// (grid yaw = pi/2 - bearing).
+double max_error_vs_analytic(const cv::Mat& view, const map::Camera& cam, double offset) {
+  const Eigen::Matrix3d R_wc = geo::level_camera_rotation(0.5 * kPi - offset);
+  double max_err = 0;
+  for (int y = 0; y < cam.height; y += 7)
+    for (int x = 0; x < cam.width; x += 7) {
+      const Eigen::Vector3d d =
+          R_wc * Eigen::Vector3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
+      const double b = std::atan2(d.x(), d.y());
+      const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+      max_err = std::max(max_err, std::abs(view.at<float>(y, x) - radiance(b, el)));
+    }
+  return max_err;
+}
 }  // namespace
 
 TEST_CASE("Cut views of an analytic panorama sample the right directions (all 8, across the seam)",
@@ -42,19 +59,7 @@ TEST_CASE("Cut views of an analytic panorama sample the right directions (all 8,
     const cv::Mat view = geotag::cut_panorama_view(pano, cam, offset);
     REQUIRE(view.rows == cam.height);
     REQUIRE(view.cols == cam.width);
-    // Independent ray: a level camera whose optical axis has bearing `offset` (relative to the
-    // panorama heading), from the core's level_camera_rotation in a frame with x = east',
-    // y = north' (grid yaw = pi/2 - bearing).
-    const Eigen::Matrix3d R_wc = geo::level_camera_rotation(0.5 * kPi - offset);
-    double max_err = 0;
-    for (int y = 0; y < cam.height; y += 7)
-      for (int x = 0; x < cam.width; x += 7) {
-        const Eigen::Vector3d d =
-            R_wc * Eigen::Vector3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
-        const double b = std::atan2(d.x(), d.y());
-        const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
-        max_err = std::max(max_err, std::abs(view.at<float>(y, x) - radiance(b, el)));
-      }
+    const double max_err = max_error_vs_analytic(view, cam, offset);
     INFO("view " << k << " max error " << max_err);
     // Bilinear interpolation of this function on a 0.18 deg grid errs by < 0.01 grey levels; a
     // half-pixel shift of the panorama would err by ~0.5.
@@ -62,17 +67,7 @@ TEST_CASE("Cut views of an analytic panorama sample the right directions (all 8,
   }
   // The check is sharp: a 0.05 deg error in the cut direction already fails it.
   const cv::Mat off = geotag::cut_panorama_view(pano, cam, 0.05 * kPi / 180.0);
-  const Eigen::Matrix3d R0 = geo::level_camera_rotation(0.5 * kPi);
-  double max_err = 0;
-  for (int y = 0; y < cam.height; y += 7)
-    for (int x = 0; x < cam.width; x += 7) {
-      const Eigen::Vector3d d =
-          R0 * Eigen::Vector3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
-      max_err = std::max(max_err, std::abs(off.at<float>(y, x) -
-                                           radiance(std::atan2(d.x(), d.y()),
-                                                    std::atan2(d.z(), std::hypot(d.x(), d.y())))));
-    }
-  CHECK(max_err > 0.1);
+  CHECK(max_error_vs_analytic(off, cam, 0.0) > 0.1);
 }
 
 TEST_CASE("PanoramaCutter (tables once, columns shifted per view) equals cutting each view anew",
@@ -98,18 +93,7 @@ TEST_CASE("PanoramaCutter (tables once, columns shifted per view) equals cutting
     // this image (slope < 1 grey level per px) that is < 1/32 grey level.
     CHECK(cv::norm(a, b, cv::NORM_INF) < 1.0 / 32.0);
     // And the cutter's view is as accurate as the test above asks of cut_panorama_view().
-    const Eigen::Matrix3d R_wc = geo::level_camera_rotation(0.5 * kPi - offset);
-    double max_err = 0;
-    for (int y = 0; y < cam.height; y += 7)
-      for (int x = 0; x < cam.width; x += 7) {
-        const Eigen::Vector3d d =
-            R_wc * Eigen::Vector3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
-        max_err = std::max(
-            max_err,
-            std::abs(a.at<float>(y, x) - radiance(std::atan2(d.x(), d.y()),
-                                                  std::atan2(d.z(), std::hypot(d.x(), d.y())))));
-      }
-    CHECK(max_err < 0.02);
+    CHECK(max_error_vs_analytic(a, cam, offset) < 0.02);
   }
   CHECK_THROWS_AS(cutter.cut(cv::Mat(1024, 2000, CV_32F, cv::Scalar(0)), 0.0), InvalidArgument);
   CHECK_THROWS_AS(cutter.cut(pano, std::nan("")), InvalidArgument);
