@@ -59,10 +59,10 @@ build options
                      EXIF FocalLengthIn35mmFilm)
   --sift N           RootSIFT features per view (default 1000)
   --orb N            ORB features per view (default 2000)
-  --retrieval-scale S  RootSIFT for retrieval on images resized by S in (0, 1], views and
-                     queries alike (default 0.5: a 2048-px panorama cut to a KITTI-like field of
-                     view is ~2x upsampled, so full resolution adds cost, not detail; use 1 for
-                     panoramas or photos as sharp as the video)
+  --retrieval-scale S  RootSIFT for retrieval on images resized by at most S in (0, 1]
+                     (default 0.5); a panorama view is resized to its panorama's own
+                     resolution if that is lower (0.45 for 2048 px and KITTI's fx), and queries
+                     by the largest factor any view was. Use 1 for photos as sharp as the video
   --branching B      vocabulary tree branching (default 10)
   --depth L          vocabulary tree depth (default 4: up to 10^4 words)
   --train N          descriptors sampled to train the vocabulary (default 200000)

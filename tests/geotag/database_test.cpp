@@ -6,10 +6,12 @@
 #include <filesystem>
 #include <fstream>
 #include <geodrift/geotag/database.hpp>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
+#include "support/kitti.hpp"
 #include "support/test_files.hpp"
 
 using namespace geodrift;
@@ -130,6 +132,7 @@ TEST_CASE("Database on the Lund photos: build, retrieve, gate, save and load",
   CHECK(back.memory_mapped());
   CHECK_FALSE(db.memory_mapped());
   CHECK(back.retrieval_scale() == db.retrieval_scale());
+  CHECK(db.retrieval_scale() == 0.5);  // photos are resized by BuildOptions::retrieval_scale
   CHECK_THROWS_AS(back.orb(static_cast<int>(db.views().size())), std::out_of_range);
   // A copy shares the mapping and outlives the original.
   std::optional<geotag::Database> copy;
@@ -147,6 +150,29 @@ TEST_CASE("Database on the Lund photos: build, retrieve, gate, save and load",
   for (std::size_t i = 0; i < near.size(); ++i) {
     CHECK(again[i].view == near[i].view);
     CHECK(again[i].score == near[i].score);
+  }
+
+  // Views are spread over threads; the database does not depend on how many.
+  {
+    const int threads = cv::getNumThreads();
+    cv::setNumThreads(1);
+    const geotag::Database serial = geotag::Database::build(sources, small_options());
+    cv::setNumThreads(threads);
+    serial.save(tmp.file("serial.gdb"));
+    CHECK(test::read_text(tmp.file("serial.gdb")) == test::read_text(path));
+    std::filesystem::remove(tmp.file("serial.gdb"));
+  }
+  // Two unreadable images: the error names the first in the list, whichever thread met it.
+  {
+    std::vector<geotag::GeoSource> bad = sources;
+    bad[21].path = tmp.file("gone_21.jpg");
+    bad[4].path = tmp.file("gone_4.jpg");
+    try {
+      geotag::Database::build(bad, small_options());
+      FAIL("a missing image was accepted");
+    } catch (const Error& e) {
+      CHECK(std::string(e.what()).find("gone_4.jpg") != std::string::npos);
+    }
   }
 
   // A truncated copy and a foreign file are refused with the path in the message.
@@ -224,6 +250,49 @@ TEST_CASE("Geo-tag CSVs with bad rows are refused naming the line", "[geotag][da
   const auto black =
       geotag::read_geotag_csv(csv("black.csv", h + "0,black.png,49,8.4,160,90\n"), so);
   CHECK_THROWS_AS(geotag::Database::build(black, small_options()), Error);
+}
+
+TEST_CASE("Panorama views are resized for retrieval to their panorama's own resolution",
+          "[geotag][database]") {
+  // Two 1024 x 512 panoramas of smoothed noise: 2.85 px/deg, against 12.5 px/deg at the centre
+  // of a KITTI view (fx 718.856), so views and queries are resized by 1024 / (2 pi fx).
+  test::TempDir tmp;
+  cv::RNG rng(7);
+  std::vector<geotag::GeoSource> sources;
+  for (int i = 0; i < 2; ++i) {
+    cv::Mat pano(512, 1024, CV_8U);
+    rng.fill(pano, cv::RNG::UNIFORM, 0, 256);
+    cv::GaussianBlur(pano, pano, cv::Size(0, 0), 2.0);
+    const std::string path = tmp.file("pano_" + std::to_string(i) + ".png");
+    REQUIRE(cv::imwrite(path, pano));
+    geotag::GeoSource s;
+    s.tag.id = i;
+    s.tag.latitude_deg = 49.011 + 1e-4 * i;
+    s.tag.longitude_deg = 8.417;
+    s.tag.height = 160;
+    s.tag.heading = 0;
+    s.path = path;
+    s.kind = geotag::SourceKind::kPanorama;
+    sources.push_back(s);
+  }
+  geotag::Database::BuildOptions o = small_options();
+  o.video_camera = test::kitti_camera();
+  const geotag::Database db = geotag::Database::build(sources, o);
+  REQUIRE(db.views().size() == 16);
+  const double native = 1024.0 / (2.0 * 3.14159265358979323846 * o.video_camera.fx);
+  CHECK(db.retrieval_scale() == Approx(native).epsilon(1e-12));
+  CHECK(native == Approx(0.2267).margin(1e-4));
+  // Each view retrieves itself first when queried with its own image.
+  for (int v : {0, 5, 11}) {
+    geotag::QueryOptions q;
+    q.top_k = 1;
+    const std::vector<geotag::Retrieved> r = db.query(db.view_image(v), q);
+    REQUIRE(r.size() == 1);
+    CHECK(r[0].view == v);
+  }
+  // A smaller BuildOptions::retrieval_scale caps it.
+  o.retrieval_scale = 0.1;
+  CHECK(geotag::Database::build(sources, o).retrieval_scale() == 0.1);
 }
 
 TEST_CASE("The inverted file's idf: shared-by-all words carry no weight and are counted",

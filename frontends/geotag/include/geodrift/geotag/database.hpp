@@ -81,12 +81,14 @@ class Database {
     /// view as the input video").
     map::Camera video_camera;
     int sift_features = 1000;  ///< RootSIFT features per view (retrieval)
-    /// Retrieval runs RootSIFT on the image resized by this factor, views and queries alike
-    /// (stored in the database; queries use the database's). 0.5 skips the octave at the video's
-    /// full resolution, which a panorama cut to the video's field of view does not have: a
-    /// 2048-px panorama holds 5.7 px/deg, a KITTI view (fx 718) 12.5 px/deg at its centre, so
-    /// the view is the panorama upsampled about 2x. Costs a quarter of full resolution's SIFT.
-    /// In (0, 1]; 1 = full resolution (what databases of format 1 used).
+    /// Retrieval runs RootSIFT on images resized by at most this factor. 0.5 skips the octave
+    /// at the video's full resolution, which a panorama cut to the video's field of view does
+    /// not have. A panorama view is resized further, to its panorama's own resolution at the
+    /// view's centre, W / (2 pi fx): a 2048-px panorama holds 5.7 px/deg, a KITTI view (fx 718)
+    /// 12.5 px/deg, so that view is the panorama upsampled 2.2x and is resized by 0.45; more
+    /// pixels would add SIFT's cost but no detail. Queries are resized by the largest factor
+    /// any view was (Database::retrieval_scale(), stored), so that query and views see the
+    /// scene at the same scale. In (0, 1]; 1 = full resolution (format 1 databases).
     double retrieval_scale = 0.5;
     int orb_features = 2000;  ///< ORB features per view (matching)
     Vocabulary::Options vocabulary;
@@ -111,7 +113,8 @@ class Database {
   const map::Camera& video_camera() const { return video_camera_; }
   const Vocabulary& vocabulary() const { return vocabulary_; }
   const InvertedIndex& index() const { return index_; }
-  /// BuildOptions::retrieval_scale of this database.
+  /// The factor queries are resized by for retrieval: the largest any view was resized by
+  /// (BuildOptions::retrieval_scale, or less when every view is cut from a coarser panorama).
   double retrieval_scale() const { return retrieval_scale_; }
   /// The view's precomputed ORB features (keypoints in view pixels), without a copy.
   /// @throws std::out_of_range for a view that does not exist.
