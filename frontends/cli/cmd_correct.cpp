@@ -57,14 +57,15 @@ options
   --origin LAT,LON,H  origin of W (degrees, degrees, ellipsoidal metres); default: first anchor
   --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
                       always one); the others are carried along by their raw relative pose
-  --weights W         pose-graph edge weights: paper (default) | drift. paper:
-                      lambda1 = lambda2 = 1e5 on every Sim(3) component in map units,
-                      lambda3 = 1 (Iwami et al.): the result changes with the map's unit.
-                      drift: each edge carries the monocular VO's relative-pose uncertainty
-                      over its distance and turn, anchors their sigma_m
-                      (docs/correction_model.md): the result does not depend on the map's
-                      unit; experimental (better at anchors every 100-200 frames, worse at
-                      300-500, and not always convergent from INIT: docs/RESULTS.md)
+  --weights W         pose-graph edge weights: metric (default) | paper | drift.
+                      metric: the paper's lambda1 = lambda2 = 1e5 on every Sim(3) component,
+                      translation in metres at INIT's scale, lambda3 = 1: the result does not
+                      depend on the map's unit (on a map in metres it is the paper's).
+                      paper: the same in map units (Iwami et al. verbatim): the result changes
+                      with the map's unit. drift: each edge carries the monocular VO's
+                      relative-pose uncertainty over its distance and turn, anchors their
+                      sigma_m (docs/correction_model.md): unit-free too; experimental (better
+                      at anchors every 100-200 frames, worse at 300-500: docs/RESULTS.md)
   --no-screen-anchors use every anchor as given. By default each anchor is first tested
                       against all the others along the raw path (leave-one-out, under the VO
                       drift model, its level estimated from the anchors): one that disagrees
@@ -204,9 +205,7 @@ int run_correct(int argc, char** argv) {
     format = io::parse_trajectory_format(args.get("format", "auto"));
     // Both ways explicitly: the Corrector's default is the paper's, so setting only kPaper
     // left --weights drift without effect.
-    opt.edge_weights = correction::paper_weights_from_string(args.get("weights", "paper"))
-                           ? correction::CorrectorOptions::EdgeWeights::kPaper
-                           : correction::CorrectorOptions::EdgeWeights::kDriftModel;
+    opt.edge_weights = correction::edge_weights_from_string(args.get("weights", "metric"));
   } catch (const InvalidArgument& e) {
     throw UsageError(e.what());
   }
@@ -550,7 +549,7 @@ int run_correct(int argc, char** argv) {
     }
     std::ostringstream j;
     const auto& ir = corrector.init_result();
-    const bool paper_w = opt.edge_weights == correction::CorrectorOptions::EdgeWeights::kPaper;
+    const bool paper_w = opt.edge_weights != correction::CorrectorOptions::EdgeWeights::kDriftModel;
     j << "{\n  \"geodrift_version\": " << io::detail::json_string(kVersion)
       << ",\n  \"command_line\": " << io::detail::json_string(command_line(argc, argv))
       << ",\n  \"frame\": " << io::detail::json_string(note)
@@ -563,8 +562,8 @@ int run_correct(int argc, char** argv) {
       << ", \"anchors\": " << io::detail::json_string(anchors_path)
       << ", \"trajectory_only\": " << (with_map ? "false" : "true")
       << ", \"keyframe_step\": " << (with_map ? 0 : step) << ", \"consecutive_links\": " << links
-      << ", \"window_correspondences\": " << opt.window_correspondences
-      << ", \"edge_weights\": " << (paper_w ? "\"paper\"" : "\"drift\"")
+      << ", \"window_correspondences\": " << opt.window_correspondences << ", \"edge_weights\": \""
+      << correction::to_string(opt.edge_weights) << "\""
       << (paper_w
               ? ", \"lambda1\": " + json_num(opt.lambda1) + ", \"lambda2\": " +
                     json_num(opt.lambda2) + ", \"lambda3\": " + json_num(opt.lambda3)

@@ -62,8 +62,10 @@ constexpr const char* kHelp =
     "                     and leave out the inconsistent ones (correction/screening.hpp)\n"
     "  --methods LIST     run only these methods, of init, init+ba, init+pgo, ours, batch,\n"
     "                     piecewise, piecewise3d (default all)\n"
-    "  --weights W        PGO edge weights: paper (default; lambda1 = lambda2 = 1e5, lambda3 = 1)\n"
-    "                     | drift (the VO drift model, independent of the map's unit)\n"
+    "  --weights W        PGO edge weights: metric (default; the paper's lambda1 = lambda2 =\n"
+    "                     1e5, lambda3 = 1, translation in metres) | paper (in map units) |\n"
+    "                     drift (the VO drift model); metric and drift do not depend on the\n"
+    "                     map's unit\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
 
 struct Method {
@@ -105,11 +107,12 @@ struct Cell {
 
 /// How the experiment's runs are set up (the command's options).
 struct Setup {
-  bool paper = false;            // --weights paper
-  bool trajectory_only = false;  // --trajectory-only
-  bool gate = false;             // --gate-anchors
-  bool screen = false;           // --screen-anchors
-  std::vector<char> methods;     // --methods: which of kMethods run (all when empty)
+  correction::CorrectorOptions::EdgeWeights weights =
+      correction::CorrectorOptions::EdgeWeights::kPaperMetric;  // --weights
+  bool trajectory_only = false;                                 // --trajectory-only
+  bool gate = false;                                            // --gate-anchors
+  bool screen = false;                                          // --screen-anchors
+  std::vector<char> methods;  // --methods: which of kMethods run (all when empty)
   double wrong_fraction = 0, wrong_min_m = 0, wrong_max_m = 0;  // --wrong-anchors
 };
 
@@ -216,8 +219,7 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       if (!setup.methods.empty() && !setup.methods[m]) continue;
       correction::CorrectorOptions opt;
       opt.mode = kMethods[m].mode;
-      opt.edge_weights = setup.paper ? correction::CorrectorOptions::EdgeWeights::kPaper
-                                     : correction::CorrectorOptions::EdgeWeights::kDriftModel;
+      opt.edge_weights = setup.weights;
       opt.gate_anchors = setup.gate;
       Cell& cell = local[{m, static_cast<int>(ii)}];
       auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run,
@@ -345,7 +347,7 @@ int run_experiment(int argc, char** argv) {
   if (threads < 1 || threads > 2) throw UsageError("--threads must be 1 or 2");
   Setup setup;
   try {
-    setup.paper = correction::paper_weights_from_string(args.get("weights", "paper"));
+    setup.weights = correction::edge_weights_from_string(args.get("weights", "metric"));
   } catch (const InvalidArgument& e) {
     throw UsageError(std::string("--weights: ") + e.what());
   }
@@ -434,7 +436,12 @@ int run_experiment(int argc, char** argv) {
           "gives in brackets the ratio of its mean to the same runs with clean anchors, and "
           "that of the same method over the correct anchors alone, unscreened (what knowing "
           "the wrong ones would give: the floor of any screening).\n\n";
-  md << "PGO edge weights: " << (setup.paper ? "paper (λ1 = λ2 = 1e5, λ3 = 1)" : "drift model")
+  md << "PGO edge weights: "
+     << (setup.weights == correction::CorrectorOptions::EdgeWeights::kPaperMetric
+             ? "metric (the paper's λ1 = λ2 = 1e5, λ3 = 1; translation in metres)"
+         : setup.weights == correction::CorrectorOptions::EdgeWeights::kPaper
+             ? "paper (λ1 = λ2 = 1e5, λ3 = 1, in map units)"
+             : "drift model")
      << " (docs/correction_model.md); anchor gate " << (setup.gate ? "on" : "off")
      << "; anchor screening " << (setup.screen ? "on" : "off") << ".\n\n";
   for (const std::string& name : seqs) {

@@ -139,8 +139,8 @@ Database Database::build(const std::vector<GeoSource>& sources, const BuildOptio
   // Views are grouped by source (make_views() emits them in source order). Sources are spread
   // over OpenCV's worker threads, each worker running SIFT and ORB single-threaded (OpenCV
   // runs a parallel_for_ nested in another serially): per view this costs 20-25 % less CPU than
-  // one view at a time with OpenCV's own threads inside SIFT and ORB. The results are put
-  // together in view order afterwards, so the database does not depend on the thread count.
+  // one view at a time with OpenCV's own threads inside SIFT and ORB. Finished sources are
+  // appended in source order, so the database does not depend on the thread count.
   std::vector<std::size_t> first_view(sources.size() + 1, db.views_.size());
   for (std::size_t v = db.views_.size(); v-- > 0;)
     first_view[static_cast<std::size_t>(db.views_[v].source)] = v;
@@ -212,7 +212,7 @@ Database Database::build(const std::vector<GeoSource>& sources, const BuildOptio
       },
       workers);
   if (failure) std::rethrow_exception(failure);
-  GEODRIFT_ASSERT(appended == sources.size());
+  GEODRIFT_ASSERT(appended == sources.size() && !scale.empty());
   // Queries are extracted at the finest scale a view was.
   db.retrieval_scale_ = *std::max_element(scale.begin(), scale.end());
   db.cache_.clear();

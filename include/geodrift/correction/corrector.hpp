@@ -91,14 +91,6 @@ inline Mode mode_from_string(const std::string& s) {
   return Mode::kOurs;
 }
 
-/// True for the PGO edge weighting "paper" (CorrectorOptions::EdgeWeights::kPaper), false for
-/// "drift" (kDriftModel). @throws InvalidArgument on anything else.
-inline bool paper_weights_from_string(const std::string& s) {
-  GEODRIFT_CHECK(s == "drift" || s == "paper",
-                 "unknown edge weighting '" << s << "' (drift, paper)");
-  return s == "paper";
-}
-
 /// Corrector options; defaults are the paper's where it gives them (Sec. 3.5, 4.1).
 struct CorrectorOptions {
   Mode mode = Mode::kOurs;
@@ -144,17 +136,23 @@ struct CorrectorOptions {
   ///    anchor intervals of 100-200 frames and worse at 300-500 on 08. Its PGO windows run
   ///    with geodesic acceleration and backtracking (run_pgo), without which LM from INIT's
   ///    state stopped at the iteration limit far from the optimum on some seeds.
-  ///  - kPaper (default): the paper's λ1 = λ2 = 1e5 on all seven components of e1/e2 in MAP units
-  ///  and
-  ///    λ3 = 1 on e3 in metres. A map unit of translation then weighs as much as a radian and a
-  ///    unit of log-scale, so the result changes with the map's unit (a monocular map's unit
-  ///    is arbitrary: ORB-SLAM sets it from the first median depth).
-  enum class EdgeWeights { kDriftModel, kPaper };
-  EdgeWeights edge_weights = EdgeWeights::kPaper;
+  ///  - kPaperMetric (default): the paper's λ1 = λ2 = 1e5 on e1/e2 and λ3 = 1 on e3, with the
+  ///    translation part of e1/e2 measured in METRES at INIT's scale (map units divided by
+  ///    map_per_metre()) instead of map units. A metre of translation error then weighs as
+  ///    much as a radian of rotation and a unit of log-scale, whatever unit the VO chose, so
+  ///    the corrected path does not depend on the map's unit or frame (INIT's similarity
+  ///    scales with the map; rotation and log-scale errors do not). On a map in metres it is
+  ///    the paper's weighting itself.
+  ///  - kPaper: the paper's weights verbatim, λ1 = λ2 = 1e5 on all seven components of e1/e2
+  ///    in MAP units and λ3 = 1 on e3 in metres. A map unit of translation then weighs as
+  ///    much as a radian and a unit of log-scale, so the result changes with the map's unit (a
+  ///    monocular map's unit is arbitrary: ORB-SLAM sets it from the first median depth).
+  enum class EdgeWeights { kDriftModel, kPaper, kPaperMetric };
+  EdgeWeights edge_weights = EdgeWeights::kPaperMetric;
   DriftModel drift;      ///< the VO's error model (kDriftModel)
-  double lambda1 = 1e5;  ///< kPaper: weight of e1 (keyframe–keyframe Sim3 edges)
-  double lambda2 = 1e5;  ///< kPaper: weight of e2 (keyframe–geo-view Sim3 edges)
-  double lambda3 = 1.0;  ///< kPaper: weight of e3 (geo view centre − geo-tag, metres)
+  double lambda1 = 1e5;  ///< kPaper*: weight of e1 (keyframe–keyframe Sim3 edges)
+  double lambda2 = 1e5;  ///< kPaper*: weight of e2 (keyframe–geo-view Sim3 edges)
+  double lambda3 = 1.0;  ///< kPaper*: weight of e3 (geo view centre − geo-tag, metres)
   /// e1 edges join keyframe pairs sharing at least this many map points. The paper extends
   /// Strasdat's / ORB-SLAM's Sim3 pose graph, which ORB-SLAM runs on its essential graph:
   /// covisibility with θ_min = 100 shared points (Mur-Artal et al. 2015, Sec. VIII-B). With
@@ -337,6 +335,29 @@ struct CorrectorOptions {
     return true;
   }
 };
+
+/// The PGO edge weighting named `s`: "metric" (CorrectorOptions::EdgeWeights::kPaperMetric),
+/// "paper" (kPaper) or "drift" (kDriftModel). @throws InvalidArgument on anything else.
+inline CorrectorOptions::EdgeWeights edge_weights_from_string(const std::string& s) {
+  GEODRIFT_CHECK(s == "metric" || s == "paper" || s == "drift",
+                 "unknown edge weighting '" << s << "' (metric, paper, drift)");
+  return s == "metric"  ? CorrectorOptions::EdgeWeights::kPaperMetric
+         : s == "paper" ? CorrectorOptions::EdgeWeights::kPaper
+                        : CorrectorOptions::EdgeWeights::kDriftModel;
+}
+
+/// The name edge_weights_from_string() takes for `w`.
+inline const char* to_string(CorrectorOptions::EdgeWeights w) {
+  switch (w) {
+    case CorrectorOptions::EdgeWeights::kPaperMetric:
+      return "metric";
+    case CorrectorOptions::EdgeWeights::kPaper:
+      return "paper";
+    case CorrectorOptions::EdgeWeights::kDriftModel:
+      return "drift";
+  }
+  return "?";
+}
 
 /// What the Corrector did with one correspondence (anchor) it received.
 struct AnchorDecision {
@@ -1099,13 +1120,26 @@ class Corrector {
       if (i >= lo && i <= hi) return &S[i - lo];
       return &fixed.try_emplace(i, S_at(i)).first->second;
     };
-    const bool paper = options_.edge_weights == CorrectorOptions::EdgeWeights::kPaper;
+    const bool paper = options_.edge_weights != CorrectorOptions::EdgeWeights::kDriftModel;
+    const bool metric = options_.edge_weights == CorrectorOptions::EdgeWeights::kPaperMetric;
+    // The paper's λ on (ω, σ) and, with kPaperMetric, on ν in metres: λ / m² per map unit²,
+    // m = map_per_metre() (INIT's scale, so the weights follow the map's unit).
+    auto paper_information = [&](double lambda) {
+      Eigen::Matrix<double, 7, 1> w = Eigen::Matrix<double, 7, 1>::Constant(lambda);
+      if (metric) w.tail<3>() /= map_per_metre() * map_per_metre();
+      return Eigen::Matrix<double, 7, 7>(w.asDiagonal());
+    };
+    const Eigen::Matrix<double, 7, 7> info1 = paper_information(options_.lambda1);
+    const Eigen::Matrix<double, 7, 7> info2 = paper_information(options_.lambda2);
     auto add_e1 = [&](int i, int j) {
       lie::Sim3d* Si = node(i);
       lie::Sim3d* Sj = node(j);
       // ΔS_ij from the poses before optimisation: e1 = 0 at the start.
       const lie::Sim3d dS = *Sj * Si->inverse();
-      if (paper)
+      if (metric)
+        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial, info1, Si,
+                                   Sj);
+      else if (paper)
         problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial,
                                    options_.lambda1, Si, Sj);
       else
@@ -1142,7 +1176,10 @@ class Corrector {
         // weighted down by the view's localization uncertainty
         // (CorrectorOptions::weight_by_localization).
         const double eff = geo_term_sd_m(c, k);
-        problem.add_residual_block(e2, trivial, options_.lambda2, node(k), &V[j]);
+        if (metric)
+          problem.add_residual_block(e2, trivial, info2, node(k), &V[j]);
+        else
+          problem.add_residual_block(e2, trivial, options_.lambda2, node(k), &V[j]);
         problem.add_residual_block(e3, trivial, options_.lambda3 * (tag * tag) / (eff * eff),
                                    &V[j]);
       } else {

@@ -13,7 +13,8 @@
 /// does not depend on the map's unit, origin or orientation (issue 24, DESIGN.md
 /// "Correction" 5). The paper's weighting (λ1 = λ2 = 1e5 on all seven components, in map units)
 /// weighs a map unit of translation against a radian and a unit of log-scale, so its result
-/// changes with the map's unit; it stays available as CorrectorOptions::EdgeWeights::kPaper.
+/// changes with the map's unit; it stays available as CorrectorOptions::EdgeWeights::kPaper
+/// (kPaperMetric, the default, measures their translation in metres instead).
 
 #include <Eigen/Core>
 #include <algorithm>
