@@ -59,8 +59,9 @@ options
                       always one); the others are carried along by their raw relative pose
   --weights W         pose-graph edge weights: metric (default) | paper | drift.
                       metric: the paper's lambda1 = lambda2 = 1e5 on every Sim(3) component,
-                      translation in metres at INIT's scale, lambda3 = 1: the result does not
-                      depend on the map's unit (on a map in metres it is the paper's).
+                      translation in metres at INIT's scale, each anchor weighted by its
+                      sigma_m (1/sigma^2; lambda3 = 1 for views localized by `run`): the
+                      result does not depend on the map's unit.
                       paper: the same in map units (Iwami et al. verbatim): the result changes
                       with the map's unit. drift: each edge carries the monocular VO's
                       relative-pose uncertainty over its distance and turn, anchors their

@@ -242,6 +242,53 @@ TEST_CASE("A badly localized geo view with its covariance pulls the window less"
   }
 }
 
+TEST_CASE("A direct position fix weighs by its sigma, a localized view keeps the paper's lambda3",
+          "[correction]") {
+  // Trajectory only, with a monocular scale drift: the VO's step lengths grow linearly from
+  // 0.8 to 1.3 of the truth along the L-shaped road. Anchors every 10 keyframes at the true
+  // centres, σ = 5 cm. As direct fixes of their keyframes (an anchor file, GNSS) the geo term
+  // has information 1/σ² and the corrected path passes through them; marked as views localized
+  // by PnP (inliers > 0) they keep the paper's λ3 = 1 (about 1 m) and the λ1 = 1e5 edges keep
+  // more of the drifted shape.
+  const int n = 90;
+  std::vector<int> at;
+  for (int a = 0; a < n; a += 10) at.push_back(a);
+  at.push_back(n - 1);
+  ExactScene s = make_exact_scene(n, at);
+  s.points.clear();
+  s.obs.clear();
+  // Map poses with the drifted centres (rotations exact, map scale as make_exact_scene's).
+  const double s_mw = 0.05;
+  std::vector<Eigen::Vector3d> c_m(n, Eigen::Vector3d::Zero());
+  for (int i = 1; i < n; ++i)
+    c_m[i] = c_m[i - 1] + (0.8 + 0.5 * i / (n - 1.0)) * (s.centres_w[i] - s.centres_w[i - 1]);
+  for (int i = 0; i < n; ++i) {
+    const lie::SO3d R_cm = s.kfs[i].T_cw.rotation();
+    s.kfs[i].T_cw = lie::SE3d(R_cm, -(R_cm.act(s_mw * c_m[i])));
+  }
+  double at_anchor[2], mean[2];
+  for (bool localized : {false, true}) {
+    ExactScene t = s;
+    for (auto& c : t.corr) c.inliers = localized ? 50 : 0;
+    correction::CorrectorOptions opt;
+    opt.mode = correction::Mode::kInitPgo;
+    correction::Corrector c(opt);
+    feed(&c, t);
+    REQUIRE(c.initialized());
+    double worst = 0;
+    for (const auto& k : t.corr)
+      worst = std::max(worst, (c.keyframe_center_w(k.keyframe) - k.y_w).norm());
+    at_anchor[localized] = worst;
+    mean[localized] = mean_2d_error(c, t);
+  }
+  INFO("largest distance corrected centre - anchor: direct fixes "
+       << at_anchor[0] << " m, localized views " << at_anchor[1] << " m");
+  INFO("mean 2D error: direct fixes " << mean[0] << " m, localized views " << mean[1] << " m");
+  CHECK(at_anchor[0] < 3 * 0.05);
+  CHECK(at_anchor[1] > 2 * at_anchor[0]);
+  CHECK(mean[0] < mean[1]);
+}
+
 TEST_CASE("Corrector refuses a pose covariance with a negative variance", "[correction]") {
   correction::Corrector c;
   map::Keyframe k;

@@ -141,8 +141,16 @@ struct CorrectorOptions {
   ///    map_per_metre()) instead of map units. A metre of translation error then weighs as
   ///    much as a radian of rotation and a unit of log-scale, whatever unit the VO chose, so
   ///    the corrected path does not depend on the map's unit or frame (INIT's similarity
-  ///    scales with the map; rotation and log-scale errors do not). On a map in metres it is
-  ///    the paper's weighting itself.
+  ///    scales with the map; rotation and log-scale errors do not). e3 of a view localized in
+  ///    the map (the paper's geo-tagged images) keeps λ3 = 1: it stands for a view ~1 m off
+  ///    beyond its tag, what a view localized in a drifted map is (PnP's own covariance
+  ///    underrates it 8-10×: weight_by_localization). e3 of a direct position fix of the
+  ///    keyframe (an anchor file, a GNSS fix: Correspondence::localized() false) has
+  ///    information 1/σ² [1/m²] from its own sigma_m, as it has no localization error: with
+  ///    λ3 = 1 there, a σ of 5 cm was read as a metre and trajectory-only correction of our own
+  ///    VO on rendered 02 (anchors every 100 frames from the ground truth, σ 0.05 m) ended
+  ///    0.34 m off; with 1/σ² 0.12 m (docs/vo_drift.md). On a map in metres with localized
+  ///    views it is the paper's weighting itself.
   ///  - kPaper: the paper's weights verbatim, λ1 = λ2 = 1e5 on all seven components of e1/e2
   ///    in MAP units and λ3 = 1 on e3 in metres. A map unit of translation then weighs as
   ///    much as a radian and a unit of log-scale, so the result changes with the map's unit (a
@@ -152,7 +160,9 @@ struct CorrectorOptions {
   DriftModel drift;      ///< the VO's error model (kDriftModel)
   double lambda1 = 1e5;  ///< kPaper*: weight of e1 (keyframe–keyframe Sim3 edges)
   double lambda2 = 1e5;  ///< kPaper*: weight of e2 (keyframe–geo-view Sim3 edges)
-  double lambda3 = 1.0;  ///< kPaper*: weight of e3 (geo view centre − geo-tag, metres)
+  /// kPaper*: weight of e3 (geo view centre − geo-tag, metres); kPaperMetric: of localized
+  /// views only (direct fixes weigh 1/σ²).
+  double lambda3 = 1.0;
   /// e1 edges join keyframe pairs sharing at least this many map points. The paper extends
   /// Strasdat's / ORB-SLAM's Sim3 pose graph, which ORB-SLAM runs on its essential graph:
   /// covisibility with θ_min = 100 shared points (Mur-Artal et al. 2015, Sec. VIII-B). With
@@ -747,6 +757,13 @@ class Corrector {
   double tag_sd_m(const map::Correspondence& c) const {
     return c.sigma_m > 0 ? c.sigma_m : options_.ba_geo_sigma_m;
   }
+  /// kPaperMetric's e3 information [1/m²] for correspondence c whose geo term has SD `eff`
+  /// (geo_term_sd_m): the paper's λ3 (times σ_tag²/eff², weight_by_localization) for a view
+  /// localized in the map, 1/eff² for a direct position fix (CorrectorOptions::EdgeWeights).
+  double metric_geo_information(const map::Correspondence& c, double eff) const {
+    const double tag = tag_sd_m(c);
+    return c.localized() ? options_.lambda3 * (tag * tag) / (eff * eff) : 1.0 / (eff * eff);
+  }
   /// σ of the geo terms of correspondence c localized against keyframe index k (metres).
   double geo_term_sd_m(const map::Correspondence& c, int k) const {
     const double tag = tag_sd_m(c);
@@ -1180,8 +1197,10 @@ class Corrector {
           problem.add_residual_block(e2, trivial, info2, node(k), &V[j]);
         else
           problem.add_residual_block(e2, trivial, options_.lambda2, node(k), &V[j]);
-        problem.add_residual_block(e3, trivial, options_.lambda3 * (tag * tag) / (eff * eff),
-                                   &V[j]);
+        problem.add_residual_block(
+            e3, trivial,
+            metric ? metric_geo_information(c, eff) : options_.lambda3 * (tag * tag) / (eff * eff),
+            &V[j]);
       } else {
         // The VO's error over the keyframe→view offset, plus the view's own localization
         // covariance (in the map, so already in map units) where it has one.

@@ -37,6 +37,10 @@ struct Correspondence {
 
   /// True when pose_cov was filled in by the localization.
   bool has_pose_covariance() const { return pose_cov.block<3, 3>(3, 3).trace() > 0; }
+  /// True for a view localized in the map (PnP inliers or a pose covariance); false for a
+  /// direct position fix of the keyframe (an anchor read from a file, a GNSS fix), whose
+  /// sigma_m is then the whole uncertainty of the geo term.
+  bool localized() const { return inliers > 0 || has_pose_covariance(); }
 };
 
 }  // namespace geodrift::map
