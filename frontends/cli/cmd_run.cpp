@@ -82,6 +82,8 @@ inputs
                       not used in correspondences.csv and report.json
   --photo-hfov-deg D  horizontal field of view of geo-tagged photos whose CSV row has no
                       fx..cy (default: from EXIF FocalLengthIn35mmFilm); --geotags folder only
+  --weights W         pose-graph edge weights of the correction: metric (default) | paper |
+                      drift, as in `geodrift correct --help`
 
 options
   --fps F             frame rate for timestamps of an image folder without times.txt (default 10)
@@ -120,7 +122,7 @@ int run_run(int argc, char** argv) {
   const Args args(
       argc, argv,
       {"images", "video", "calib", "geotags", "geotag-gate", "geotag-every", "geotag-top-k",
-       "photo-hfov-deg", "fps", "max-frames", "features", "threads", "out"},
+       "photo-hfov-deg", "fps", "max-frames", "features", "threads", "weights", "out"},
       {"help", "force", "no-screen-anchors", "no-geotag-direction-gate"});
   if (args.flag("help")) {
     std::fputs(kRunHelp, stdout);
@@ -160,6 +162,13 @@ int run_run(int argc, char** argv) {
   if (vopt.orb.num_features < 100) throw UsageError("--features must be >= 100");
   vopt.num_threads = static_cast<int>(args.get_int("threads", 1));
   if (vopt.num_threads != 1 && vopt.num_threads != 2) throw UsageError("--threads must be 1 or 2");
+  correction::CorrectorOptions copt;
+  {
+    const std::string w = args.get("weights", "metric");
+    if (w != "metric" && w != "paper" && w != "drift")
+      throw UsageError("--weights must be metric, paper or drift (not '" + w + "')");
+    copt.edge_weights = correction::edge_weights_from_string(w);
+  }
   {
     std::error_code ec;
     const std::filesystem::path p(out_dir);
@@ -259,7 +268,7 @@ int run_run(int argc, char** argv) {
 
   // ---- VO -> Corrector ----------------------------------------------------------------------
   vo::Odometry odo(calib.camera, vopt);
-  correction::Corrector corrector;
+  correction::Corrector corrector(copt);
   corrector.add_camera(calib.camera);
   int streamed = 0;
   odo.set_keyframe_callback([&](const vo::KeyframeBatch& b) {
@@ -410,7 +419,7 @@ int run_run(int argc, char** argv) {
                     "drifted (geo-tags of another place, or a broken VO path): no trustworthy "
                     "result, nothing written (--no-screen-anchors uses them all)");
       } else if (screening.num_left_out() > 0) {
-        rescreened = std::make_unique<correction::Corrector>();
+        rescreened = std::make_unique<correction::Corrector>(copt);
         correction::apply_screening(screening, geo_all, rescreened.get());
         correction::replay(m, geo_all, rescreened.get());
         if (!rescreened->initialized())

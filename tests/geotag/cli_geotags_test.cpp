@@ -56,8 +56,9 @@ TEST_CASE("geotags CLI: usage and input errors exit non-zero with a message",
 TEST_CASE("run CLI: the geo-tag cost options are validated before any work",
           "[geotag][cli][errors]") {
   test::TempDir tmp;
-  for (const char* bad : {"--geotag-every 0", "--geotag-every -3", "--geotag-top-k 0",
-                          "--photo-hfov-deg 0", "--photo-hfov-deg 180", "--photo-hfov-deg nan"}) {
+  for (const char* bad :
+       {"--geotag-every 0", "--geotag-every -3", "--geotag-top-k 0", "--photo-hfov-deg 0",
+        "--photo-hfov-deg 180", "--photo-hfov-deg nan", "--weights lambda"}) {
     const Run r = run("run --images " + tmp.path().string() + " --geotags " + tmp.path().string() +
                       " " + bad + " --out " + tmp.file("out"));
     INFO(bad << ": " << r.output);
