@@ -60,9 +60,10 @@ build options
   --sift N           RootSIFT features per view (default 1000)
   --orb N            ORB features per view (default 2000)
   --retrieval-scale S  RootSIFT for retrieval on images resized by at most S in (0, 1]
-                     (default 0.5); a panorama view is resized to its panorama's own
-                     resolution if that is lower (0.45 for 2048 px and KITTI's fx), and queries
-                     by the largest factor any view was. Use 1 for photos as sharp as the video
+                     (default 0.5: SIFT's doubled first octave at the image's resolution); a
+                     panorama view is resized to half its panorama's own resolution if that
+                     is lower (0.23 for 2048 px and KITTI's fx), and queries by the largest
+                     factor any view was. Use 1 for photos as sharp as the video
   --branching B      vocabulary tree branching (default 10)
   --depth L          vocabulary tree depth (default 4: up to 10^4 words)
   --train N          descriptors sampled to train the vocabulary (default 200000)

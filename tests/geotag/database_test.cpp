@@ -252,10 +252,11 @@ TEST_CASE("Geo-tag CSVs with bad rows are refused naming the line", "[geotag][da
   CHECK_THROWS_AS(geotag::Database::build(black, small_options()), Error);
 }
 
-TEST_CASE("Panorama views are resized for retrieval to their panorama's own resolution",
+TEST_CASE("Panorama views are resized for retrieval to half their panorama's own resolution",
           "[geotag][database]") {
   // Two 1024 x 512 panoramas of smoothed noise: 2.85 px/deg, against 12.5 px/deg at the centre
-  // of a KITTI view (fx 718.856), so views and queries are resized by 1024 / (2 pi fx).
+  // of a KITTI view (fx 718.856), so views and queries are resized by half of 1024 / (2 pi fx):
+  // SIFT's doubled first octave then sits at the panorama's own pixels.
   test::TempDir tmp;
   cv::RNG rng(7);
   std::vector<geotag::GeoSource> sources;
@@ -280,8 +281,8 @@ TEST_CASE("Panorama views are resized for retrieval to their panorama's own reso
   const geotag::Database db = geotag::Database::build(sources, o);
   REQUIRE(db.views().size() == 16);
   const double native = 1024.0 / (2.0 * 3.14159265358979323846 * o.video_camera.fx);
-  CHECK(db.retrieval_scale() == Approx(native).epsilon(1e-12));
   CHECK(native == Approx(0.2267).margin(1e-4));
+  CHECK(db.retrieval_scale() == Approx(0.5 * native).epsilon(1e-12));
   // Each view retrieves itself first when queried with its own image.
   for (int v : {0, 5, 11}) {
     geotag::QueryOptions q;

@@ -171,9 +171,13 @@ Database Database::build(const std::vector<GeoSource>& sources, const BuildOptio
               for (std::size_t v = first_view[s]; v < first_view[s + 1]; ++v) {
                 const GeoView& view = db.views_[v];
                 const cv::Mat img = cut_source_view(gray, view, &cutter);
-                scale[v] = view.direction < 0 ? o.retrieval_scale
-                                              : std::min(o.retrieval_scale,
-                                                         gray.cols / (2 * kPi * view.camera.fx));
+                // SIFT doubles its input for its first octave: a panorama view resized to half
+                // its panorama's own resolution at the view's centre has that octave at the
+                // panorama's pixels, the finest detail the view holds.
+                scale[v] =
+                    view.direction < 0
+                        ? o.retrieval_scale
+                        : std::min(o.retrieval_scale, 0.5 * gray.cols / (2 * kPi * view.camera.fx));
                 sift[v] = to_u8(
                     detect_root_sift(retrieval_image(img, scale[v]), o.sift_features).descriptors);
                 const Features f = detect_orb(img, o.orb_features);

@@ -81,14 +81,16 @@ class Database {
     /// view as the input video").
     map::Camera video_camera;
     int sift_features = 1000;  ///< RootSIFT features per view (retrieval)
-    /// Retrieval runs RootSIFT on images resized by at most this factor. 0.5 skips the octave
-    /// at the video's full resolution, which a panorama cut to the video's field of view does
-    /// not have. A panorama view is resized further, to its panorama's own resolution at the
-    /// view's centre, W / (2 pi fx): a 2048-px panorama holds 5.7 px/deg, a KITTI view (fx 718)
-    /// 12.5 px/deg, so that view is the panorama upsampled 2.2x and is resized by 0.45; more
-    /// pixels would add SIFT's cost but no detail. Queries are resized by the largest factor
-    /// any view was (Database::retrieval_scale(), stored), so that query and views see the
-    /// scene at the same scale. In (0, 1]; 1 = full resolution (format 1 databases).
+    /// Retrieval runs RootSIFT on images resized by at most this factor. SIFT doubles its
+    /// input for its first octave, so 0.5 puts that octave at the image's own resolution
+    /// instead of at twice it. A panorama view is resized further, by half its panorama's own
+    /// resolution at the view's centre, W / (4 pi fx): a 2048-px panorama holds 5.7 px/deg, a
+    /// KITTI view (fx 718) 12.5 px/deg, so that view is the panorama upsampled 2.2x and is
+    /// resized by 0.23, which puts SIFT's first octave at the panorama's pixels; more pixels
+    /// would add SIFT's cost but no detail (measured: BENCHMARKS.md, "Geo-tag database").
+    /// Queries are resized by the largest factor any view was (Database::retrieval_scale(),
+    /// stored), so that query and views see the scene at the same scale. In (0, 1]; 1 = full
+    /// resolution (format 1 databases).
     double retrieval_scale = 0.5;
     int orb_features = 2000;  ///< ORB features per view (matching)
     Vocabulary::Options vocabulary;
