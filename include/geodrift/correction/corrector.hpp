@@ -757,12 +757,14 @@ class Corrector {
   double tag_sd_m(const map::Correspondence& c) const {
     return c.sigma_m > 0 ? c.sigma_m : options_.ba_geo_sigma_m;
   }
-  /// kPaperMetric's e3 information [1/m²] for correspondence c whose geo term has SD `eff`
-  /// (geo_term_sd_m): the paper's λ3 (times σ_tag²/eff², weight_by_localization) for a view
-  /// localized in the map, 1/eff² for a direct position fix (CorrectorOptions::EdgeWeights).
-  double metric_geo_information(const map::Correspondence& c, double eff) const {
+  /// kPaper* e3 information for correspondence c whose geo term has SD `eff` (geo_term_sd_m):
+  /// the paper's λ3 times σ_tag²/eff² (weight_by_localization), except that kPaperMetric
+  /// weighs a direct position fix (not localized in the map) by its own 1/eff² [1/m²]
+  /// (CorrectorOptions::EdgeWeights).
+  double paper_geo_information(const map::Correspondence& c, double eff, bool metric) const {
+    if (metric && !c.localized()) return 1.0 / (eff * eff);
     const double tag = tag_sd_m(c);
-    return c.localized() ? options_.lambda3 * (tag * tag) / (eff * eff) : 1.0 / (eff * eff);
+    return options_.lambda3 * (tag * tag) / (eff * eff);
   }
   /// σ of the geo terms of correspondence c localized against keyframe index k (metres).
   double geo_term_sd_m(const map::Correspondence& c, int k) const {
@@ -1188,7 +1190,6 @@ class Corrector {
       const solver::RelativePoseResidual<lie::Sim3d> e2{sim3(c.T_vk)};
       // e3: the view's camera centre (not its translation) minus the geo-tag.
       const solver::CameraCentrePriorResidual<lie::Sim3d> e3{c.y_w};
-      const double tag = tag_sd_m(c);
       if (paper) {
         // weighted down by the view's localization uncertainty
         // (CorrectorOptions::weight_by_localization).
@@ -1197,10 +1198,7 @@ class Corrector {
           problem.add_residual_block(e2, trivial, info2, node(k), &V[j]);
         else
           problem.add_residual_block(e2, trivial, options_.lambda2, node(k), &V[j]);
-        problem.add_residual_block(
-            e3, trivial,
-            metric ? metric_geo_information(c, eff) : options_.lambda3 * (tag * tag) / (eff * eff),
-            &V[j]);
+        problem.add_residual_block(e3, trivial, paper_geo_information(c, eff, metric), &V[j]);
       } else {
         // The VO's error over the keyframe→view offset, plus the view's own localization
         // covariance (in the map, so already in map units) where it has one.
@@ -1215,6 +1213,7 @@ class Corrector {
         problem.add_residual_block(e2, trivial,
                                    Eigen::Matrix<double, 7, 7>(0.5 * (info + info.transpose())),
                                    node(k), &V[j]);
+        const double tag = tag_sd_m(c);
         problem.add_residual_block(e3, trivial, 1.0 / (tag * tag), &V[j]);
       }
       edges += 2;
