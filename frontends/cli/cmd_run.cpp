@@ -163,11 +163,10 @@ int run_run(int argc, char** argv) {
   vopt.num_threads = static_cast<int>(args.get_int("threads", 1));
   if (vopt.num_threads != 1 && vopt.num_threads != 2) throw UsageError("--threads must be 1 or 2");
   correction::CorrectorOptions copt;
-  {
-    const std::string w = args.get("weights", "metric");
-    if (w != "metric" && w != "paper" && w != "drift")
-      throw UsageError("--weights must be metric, paper or drift (not '" + w + "')");
-    copt.edge_weights = correction::edge_weights_from_string(w);
+  try {
+    copt.edge_weights = correction::edge_weights_from_string(args.get("weights", "metric"));
+  } catch (const InvalidArgument& e) {
+    throw UsageError(std::string("--weights: ") + e.what());
   }
   {
     std::error_code ec;

@@ -279,6 +279,13 @@ TEST_CASE("Rendered: panorama views localize against a VO map within 0.5 m and 1
 
 #if defined(GEODRIFT_CLI_EXE)
 namespace {
+std::vector<std::string> split_commas(const std::string& line) {
+  std::vector<std::string> f;
+  std::stringstream ss(line);
+  for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+  return f;
+}
+
 /// The dataset's geo-tags as a CSV of absolute paths, geo-tag `shifted` (if any) moved
 /// `north_m` metres north: a mis-tagged panorama.
 std::string tags_csv(const std::string& dir, int shifted, double north_m) {
@@ -291,9 +298,7 @@ std::string tags_csv(const std::string& dir, int shifted, double north_m) {
       header = false;
       continue;
     }
-    std::vector<std::string> f;
-    std::stringstream ss(line);
-    for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+    const std::vector<std::string> f = split_commas(line);
     REQUIRE(f.size() >= 6);
     double lat = std::stod(f[2]);
     if (std::stoi(f[0]) == shifted) lat += north_m / 111200.0;  // metres per degree of latitude
@@ -345,9 +350,7 @@ TEST_CASE("Rendered: geodrift run leaves out a panorama tagged 40 m off and keep
   int bad_rows = 0;
   while (std::getline(c, line)) {
     if (line.empty() || line[0] == '#' || line.rfind("id,", 0) == 0) continue;
-    std::vector<std::string> f;
-    std::stringstream ss(line);
-    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    const std::vector<std::string> f = split_commas(line);
     REQUIRE(f.size() >= 10);  // id,keyframe,frame,geotag,x,y,z,inliers,rms,used,...
     const int tag = std::stoi(f[3]), u = std::stoi(f[9]);
     ++rows[tag];
