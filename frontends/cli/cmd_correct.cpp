@@ -608,6 +608,9 @@ int run_correct(int argc, char** argv) {
         << ", \"message\": " << io::detail::json_string(unc.message)
         << ", \"drift_variance_factor\": " << json_num(unc.ok ? unc.drift_factor : NAN)
         << ", \"anchor_variance_factor\": " << json_num(unc.ok ? unc.anchor_factor : NAN)
+        << ", \"fit_drift_variance_factor\": " << json_num(unc.ok ? unc.fit_drift_factor : NAN)
+        << ", \"prediction_factor\": " << json_num(unc.ok ? unc.prediction_factor : NAN)
+        << ", \"predicted_anchors\": " << unc.predicted_anchors
         << ", \"redundancy\": " << json_num(unc.ok ? unc.redundancy : NAN)
         << ", \"median_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd[sd.size() / 2])
         << ", \"max_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd.back())

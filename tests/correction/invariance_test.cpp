@@ -144,8 +144,8 @@ struct ModelRun {
 
 /// A planar drive of `n` 3 m steps with 90° turns every 60 steps, seen by a monocular VO whose
 /// step errors are drawn from DriftModel × k_true (rotation, log-scale, direction), in a map of
-/// 0.1 units per metre; anchors every 25 keyframes at the true centre + N(0, σ²), σ = 0.1 m.
-ModelRun model_run(unsigned seed, double k_true, int n = 300) {
+/// 0.1 units per metre; anchors every 25 keyframes at the true centre + N(0, σ²), σ = `sigma` m.
+ModelRun model_run(unsigned seed, double k_true, int n = 300, double sigma = 0.1) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> N01(0.0, 1.0);
   const correction::DriftModel model;
@@ -189,7 +189,6 @@ ModelRun model_run(unsigned seed, double k_true, int n = 300) {
     kf.T_cw = Tm.inverse();
     r.m.keyframes.push_back(kf);
   }
-  const double sigma = 0.1;
   for (int i = 0, id = 0; i < n; i += 25, ++id) {
     map::Correspondence c;
     c.id = id;
@@ -207,7 +206,7 @@ ModelRun model_run(unsigned seed, double k_true, int n = 300) {
 TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
           "[correction][uncertainty]") {
   const double k_true = 4.0;  // the data drift 4x (in variance) more than the nominal model
-  std::vector<double> coverage, k_est, ka_est;
+  std::vector<double> coverage, coverage_corrected, k_est, ka_est;
   int ok = 0;
   for (unsigned seed = 1; seed <= 24; ++seed) {
     const ModelRun r = model_run(seed, k_true);
@@ -222,7 +221,13 @@ TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
     REQUIRE(u.ok);
     ++ok;
     REQUIRE(u.cov_en.size() == r.truth.size());
-    coverage.push_back(eval::ellipse_coverage(u.map_estimate_w, r.truth, u.cov_en));
+    coverage.push_back(eval::ellipse_coverage(u.map_estimate_w, r.truth, u.posterior_cov_en));
+    // About the path the user gets (the Corrector's): the posterior plus the offset between
+    // the two estimates.
+    std::vector<Eigen::Vector3d> corrected;
+    for (int i = 0; i < corrector.num_keyframes(); ++i)
+      corrected.push_back(corrector.keyframe_center_w(i));
+    coverage_corrected.push_back(eval::ellipse_coverage(corrected, r.truth, u.cov_en));
     k_est.push_back(u.drift_factor);
     ka_est.push_back(u.anchor_factor);
     // Every covariance is a proper one, and uncertainty grows away from the anchors.
@@ -235,13 +240,60 @@ TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
   std::sort(k_est.begin(), k_est.end());
   double mean_cov = 0;
   for (double c : coverage) mean_cov += c / coverage.size();
-  INFO("mean coverage " << mean_cov << ", median k " << k_est[k_est.size() / 2]);
+  double mean_corrected = 0;
+  for (double c : coverage_corrected) mean_corrected += c / coverage_corrected.size();
+  INFO("mean coverage " << mean_cov << " (about the corrected path " << mean_corrected
+                        << "), median k " << k_est[k_est.size() / 2]);
   CHECK(mean_cov > 0.90);
   CHECK(mean_cov < 0.99);
+  CHECK(mean_corrected > 0.90);
+  CHECK(mean_corrected < 0.99);
   // k with redundancy ≈ 3·12 − 7 per run: relative SD ≈ √(2/29) ≈ 0.26; the median of 24 runs
   // within ±35 % of the truth.
   CHECK(k_est[k_est.size() / 2] > 0.65 * k_true);
   CHECK(k_est[k_est.size() / 2] < 1.35 * k_true);
+}
+
+TEST_CASE("An anchor's prediction chi2 is its leave-one-out test in the re-solved graph",
+          "[correction][uncertainty]") {
+  // The closed form t_j = eᵀ(C − Σ_c)⁻¹e from the fit with every anchor must equal the test of
+  // the tag against the graph solved without it: (p − y)ᵀ(C + P)⁻¹(p − y), p and P the
+  // left-out keyframe's posterior mean and covariance. Factors fixed at 1 so both graphs weigh
+  // alike. The identity is one of the linearised graph: the two solutions must lie close enough
+  // for one linearisation to serve both, so the data drift 1e-4 of the model's variance and the
+  // tags are good to 1 cm (the left-out solution moves centimetres; measured: within 0.06 %).
+  // The gap grows with that move, as first-order agreement should: 0.1–1 % with 1 % of the
+  // drift, 0.3–16 % (the last anchor, an extrapolation) with 3× the drift and 10 cm tags.
+  const ModelRun r = model_run(3, 1e-4, 300, 0.01);
+  correction::PathUncertaintyOptions uo;
+  uo.estimate_variance_factors = false;
+  correction::CorrectorOptions opt;
+  opt.mode = correction::Mode::kInitPgo;
+  opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kDriftModel;
+  correction::Corrector all(opt);
+  correction::replay(r.m, r.corr, &all);
+  REQUIRE(all.initialized());
+  const correction::PathUncertainty u = correction::estimate_path_uncertainty(all, uo);
+  REQUIRE(u.ok);
+  REQUIRE(u.anchor_prediction_chi2.size() == r.corr.size());
+  CHECK(u.predicted_anchors == static_cast<int>(r.corr.size()));
+  for (const int j : {5, 6, 9, 11}) {  // after INIT's four; 11 is the last (extrapolated)
+    std::vector<map::Correspondence> others = r.corr;
+    others.erase(others.begin() + j);
+    correction::Corrector without(opt);
+    correction::replay(r.m, others, &without);
+    REQUIRE(without.initialized());
+    const correction::PathUncertainty v = correction::estimate_path_uncertainty(without, uo);
+    REQUIRE(v.ok);
+    const int k = r.corr[j].keyframe;
+    const Eigen::Vector2d e = (v.map_estimate_w[k] - r.corr[j].y_w).head<2>();
+    const double c2 = r.corr[j].sigma_m * r.corr[j].sigma_m;
+    const Eigen::Matrix2d Q = c2 * Eigen::Matrix2d::Identity() + v.posterior_cov_en[k];
+    const double t = e.dot(Q.inverse() * e);
+    INFO("anchor " << j << ": closed form " << u.anchor_prediction_chi2[j] << ", re-solved " << t
+                   << ", prediction SD " << std::sqrt(v.posterior_cov_en[k].trace()) << " m");
+    CHECK(u.anchor_prediction_chi2[j] == Approx(t).epsilon(1e-3));
+  }
 }
 
 TEST_CASE("ellipse_coverage counts errors inside the probability ellipse", "[eval][uncertainty]") {
