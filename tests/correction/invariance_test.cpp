@@ -201,6 +201,17 @@ ModelRun model_run(unsigned seed, double k_true, int n = 300, double sigma = 0.1
   return r;
 }
 
+/// INIT+PGO with the drift model's weights (the uncertainty model's own estimator).
+correction::Corrector drift_model_correction(const map::Map& m,
+                                             const std::vector<map::Correspondence>& corr) {
+  correction::CorrectorOptions opt;
+  opt.mode = correction::Mode::kInitPgo;
+  opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kDriftModel;
+  correction::Corrector c(opt);
+  correction::replay(m, corr, &c);
+  return c;
+}
+
 }  // namespace
 
 TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
@@ -210,11 +221,7 @@ TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
   int ok = 0;
   for (unsigned seed = 1; seed <= 24; ++seed) {
     const ModelRun r = model_run(seed, k_true);
-    correction::CorrectorOptions opt;
-    opt.mode = correction::Mode::kInitPgo;
-    opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kDriftModel;
-    correction::Corrector corrector(opt);
-    correction::replay(r.m, r.corr, &corrector);
+    const correction::Corrector corrector = drift_model_correction(r.m, r.corr);
     REQUIRE(corrector.initialized());
     const correction::PathUncertainty u = correction::estimate_path_uncertainty(corrector);
     INFO("seed " << seed << ": " << u.message);
@@ -267,11 +274,7 @@ TEST_CASE("An anchor's prediction chi2 is its leave-one-out test in the re-solve
   const ModelRun r = model_run(3, 1e-4, 300, 0.01);
   correction::PathUncertaintyOptions uo;
   uo.estimate_variance_factors = false;
-  correction::CorrectorOptions opt;
-  opt.mode = correction::Mode::kInitPgo;
-  opt.edge_weights = correction::CorrectorOptions::EdgeWeights::kDriftModel;
-  correction::Corrector all(opt);
-  correction::replay(r.m, r.corr, &all);
+  const correction::Corrector all = drift_model_correction(r.m, r.corr);
   REQUIRE(all.initialized());
   const correction::PathUncertainty u = correction::estimate_path_uncertainty(all, uo);
   REQUIRE(u.ok);
@@ -280,8 +283,7 @@ TEST_CASE("An anchor's prediction chi2 is its leave-one-out test in the re-solve
   for (const int j : {5, 6, 9, 11}) {  // after INIT's four; 11 is the last (extrapolated)
     std::vector<map::Correspondence> others = r.corr;
     others.erase(others.begin() + j);
-    correction::Corrector without(opt);
-    correction::replay(r.m, others, &without);
+    const correction::Corrector without = drift_model_correction(r.m, others);
     REQUIRE(without.initialized());
     const correction::PathUncertainty v = correction::estimate_path_uncertainty(without, uo);
     REQUIRE(v.ok);
