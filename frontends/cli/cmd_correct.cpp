@@ -20,6 +20,7 @@
 #include <geodrift/io/svg.hpp>
 #include <geodrift/io/trajectory.hpp>
 #include <geodrift/version.hpp>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -616,6 +617,11 @@ int run_correct(int argc, char** argv) {
         << ", \"max_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd.back())
         << ", \"seconds\": " << json_num(unc.ok ? unc.seconds : NAN) << "}";
     }
+    // Each anchor in use: its leave-one-out prediction χ² (PathUncertainty), by anchor id.
+    std::map<int, double> prediction_chi2;
+    if (unc.ok)
+      for (std::size_t c = 0; c < corrector.correspondences().size(); ++c)
+        prediction_chi2[corrector.correspondences()[c].id] = unc.anchor_prediction_chi2[c];
     j << ",\n  \"anchors\": [";
     for (std::size_t d = 0; d < decisions.size(); ++d) {
       const auto& x = decisions[d];
@@ -634,7 +640,8 @@ int run_correct(int argc, char** argv) {
         << json_num(screening.ok ? screening.anchors[x.id].innovation_m : NAN)
         << ", \"screening_sd_m\": " << json_num(screening.ok ? screening.anchors[x.id].sd_m : NAN)
         << ", \"residual_2d_m\": " << json_num(r.head<2>().norm())
-        << ", \"residual_3d_m\": " << json_num(r.norm()) << "}";
+        << ", \"residual_3d_m\": " << json_num(r.norm()) << ", \"prediction_chi2\": "
+        << json_num(prediction_chi2.count(x.id) ? prediction_chi2.at(x.id) : NAN) << "}";
     }
     j << "\n  ]"
       << ",\n  \"last_anchor_frame\": " << traj.poses[last_anchor_index].frame

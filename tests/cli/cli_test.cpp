@@ -295,8 +295,25 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
           std::string::npos);
     const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));
     CHECK(rep.find("\"uncertainty\": {\"ok\": true") != std::string::npos);
-    CHECK(json_numbers(rep, "residual_2d_m").size() ==
-          geodrift::io::read_anchors_csv(t.file("sim/anchors.csv")).records.size());
+    const std::size_t num_anchors =
+        geodrift::io::read_anchors_csv(t.file("sim/anchors.csv")).records.size();
+    CHECK(json_numbers(rep, "residual_2d_m").size() == num_anchors);
+    // Each anchor's leave-one-out prediction χ² (null where the others do not predict it):
+    // their mean is 2·prediction_factor, which the drift factor was set to bring within a
+    // quarter of its sampling error 1/√n of 1.
+    std::vector<double> chi2;
+    std::size_t entries = 0;
+    const std::string key = "\"prediction_chi2\": ";
+    for (auto p = rep.find(key); p != std::string::npos; p = rep.find(key, p + 1), ++entries)
+      if (rep.compare(p + key.size(), 4, "null") != 0)
+        chi2.push_back(std::stod(rep.substr(p + key.size())));
+    CHECK(entries == num_anchors);
+    REQUIRE(chi2.size() >= 5);
+    double mean_chi2 = 0;
+    for (const double c : chi2) mean_chi2 += c / static_cast<double>(chi2.size());
+    const double factor = json_numbers(rep, "prediction_factor").at(0);
+    CHECK(mean_chi2 / 2 == Approx(factor).epsilon(1e-6));
+    CHECK(std::abs(factor - 1) <= 0.25 / std::sqrt(static_cast<double>(chi2.size())) + 1e-9);
     const Run c = run("correct " + in + " --no-uncertainty --out " + t.file("nounc"));
     INFO(c.output);
     REQUIRE(c.code == 0);

@@ -250,6 +250,13 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
     num_residuals = sum.num_residuals;
     return true;
   };
+  // Covariance of node X's camera centre c = X⁻¹·0 in W: (1/s²)·Rᵀ·Σ_νν·R (left perturbation:
+  // c moves by −(1/s)·Rᵀ·δν).
+  auto centre_cov = [&](const lie::Sim3d& X) {
+    const Eigen::Matrix3d R = X.rotation().matrix();
+    const double s = X.scale();
+    return Eigen::Matrix3d(R.transpose() * cov.block(&X).bottomRightCorner<3, 3>() * R / (s * s));
+  };
   for (int it = 0;; ++it) {
     if (!solve_at()) return out;
     // The anchors' group: weighted squared residuals and redundancy Σ (dim − tr(W·J·Σ·Jᵀ)).
@@ -260,8 +267,7 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
       const double w3 = 1.0 / (k_a * tag_sd[j] * tag_sd[j]);
       const Eigen::Vector3d c = V[j].inverse().translation();
       chi2_a += w3 * (c - corr[j].y_w).squaredNorm();
-      const double s = V[j].scale();
-      red_a += 3.0 - w3 * cov.block(&V[j]).bottomRightCorner<3, 3>().trace() / (s * s);
+      red_a += 3.0 - w3 * centre_cov(V[j]).trace();
       // e2 between S_k and V_j.
       Eigen::Matrix<double, 7, 1> r2;
       Eigen::Matrix<double, 7, 7> Ji, Jj;
@@ -326,10 +332,7 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
     int n = 0;
     for (int j = 0; j < na; ++j) {
       out.anchor_prediction_chi2[j] = std::numeric_limits<double>::quiet_NaN();
-      const double s = V[j].scale();
-      const Eigen::Matrix3d R = V[j].rotation().matrix();
-      const Eigen::Matrix3d Sc =
-          R.transpose() * cov.block(&V[j]).bottomRightCorner<3, 3>() * R / (s * s);
+      const Eigen::Matrix3d Sc = centre_cov(V[j]);
       const double c2 = k_a * tag_sd[j] * tag_sd[j];
       const Eigen::Matrix3d Q = c2 * Eigen::Matrix3d::Identity() - Sc;
       // Redundancy of the tag's rows: an anchor that the others do not predict (its tag alone
@@ -386,11 +389,7 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
   out.cov_en.resize(nk);
   out.posterior_cov_en.resize(nk);
   for (int i = 0; i < nk; ++i) {
-    const Eigen::Matrix3d R = S[i].rotation().matrix();
-    const double s = S[i].scale();
-    const Eigen::Matrix3d Sv = cov.block(&S[i]).bottomRightCorner<3, 3>();
-    const Eigen::Matrix3d Sc = R.transpose() * Sv * R / (s * s);
-    out.posterior_cov_en[i] = Sc.topLeftCorner<2, 2>();
+    out.posterior_cov_en[i] = centre_cov(S[i]).topLeftCorner<2, 2>();
     out.map_estimate_w.push_back(S[i].inverse().translation());
     const Eigen::Vector2d d = (corrector.keyframe_center_w(i) - out.map_estimate_w[i]).head<2>();
     out.cov_en[i] = out.posterior_cov_en[i] + d * d.transpose();
