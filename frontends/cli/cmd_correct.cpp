@@ -612,6 +612,8 @@ int run_correct(int argc, char** argv) {
         << ", \"fit_drift_variance_factor\": " << json_num(unc.ok ? unc.fit_drift_factor : NAN)
         << ", \"prediction_factor\": " << json_num(unc.ok ? unc.prediction_factor : NAN)
         << ", \"predicted_anchors\": " << unc.predicted_anchors
+        << ", \"variance_dof\": " << json_num(unc.ok ? unc.variance_dof : NAN)
+        << ", \"region_factor\": " << json_num(unc.ok ? unc.region_factor : NAN)
         << ", \"redundancy\": " << json_num(unc.ok ? unc.redundancy : NAN)
         << ", \"median_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd[sd.size() / 2])
         << ", \"max_horizontal_sd_m\": " << json_num(sd.empty() ? NAN : sd.back())

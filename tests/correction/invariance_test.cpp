@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -296,6 +297,33 @@ TEST_CASE("An anchor's prediction chi2 is its leave-one-out test in the re-solve
                    << ", prediction SD " << std::sqrt(v.posterior_cov_en[k].trace()) << " m");
     CHECK(u.anchor_prediction_chi2[j] == Approx(t).epsilon(1e-3));
   }
+}
+
+TEST_CASE("Regions with an estimated variance factor are Fisher's, not the plug-in chi2",
+          "[correction][uncertainty]") {
+  // Tabulated F quantiles (0.95): F(2, 10) = 4.103, F(2, 28) = 3.340, F(2, 120) = 3.072.
+  const double chi2 = 5.991465;
+  CHECK(correction::detail::fisher_region_factor(10) == Approx(2 * 4.1028 / chi2).epsilon(1e-4));
+  CHECK(correction::detail::fisher_region_factor(28) == Approx(2 * 3.3404 / chi2).epsilon(1e-4));
+  CHECK(correction::detail::fisher_region_factor(120) == Approx(2 * 3.0718 / chi2).epsilon(1e-4));
+  CHECK(correction::detail::fisher_region_factor(std::numeric_limits<double>::infinity()) == 1.0);
+  // A 2D error whose variance is estimated from ν = 10 other draws: the plug-in χ²₂ ellipse
+  // holds it 90.4 % of the time (P(F(2, 10) ≤ 5.991/2)), the widened one 95 %.
+  std::mt19937 rng(11);
+  std::normal_distribution<double> N01(0.0, 1.0);
+  const int nu = 10, runs = 40000;
+  const double f = correction::detail::fisher_region_factor(nu);
+  int plug_in = 0, fisher = 0;
+  for (int r = 0; r < runs; ++r) {
+    double ss = 0;
+    for (int k = 0; k < nu; ++k) ss += std::pow(3.0 * N01(rng), 2);
+    const double var = ss / nu;  // the estimate of the true variance 9
+    const double e2 = std::pow(3.0 * N01(rng), 2) + std::pow(3.0 * N01(rng), 2);
+    plug_in += e2 / var <= chi2;
+    fisher += e2 / (f * var) <= chi2;
+  }
+  CHECK(plug_in / double(runs) == Approx(0.904).margin(0.005));  // SE 0.0015
+  CHECK(fisher / double(runs) == Approx(0.95).margin(0.005));
 }
 
 TEST_CASE("ellipse_coverage counts errors inside the probability ellipse", "[eval][uncertainty]") {

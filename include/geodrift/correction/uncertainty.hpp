@@ -24,10 +24,10 @@
 /// distance d_i = c_i − m_i away from it. What the user needs is the spread of the truth x_i
 /// about c_i: under the posterior x_i ~ N(m_i, Σ_i), E[(x_i − c_i)(x_i − c_i)ᵀ] = Σ_i + d_i·d_iᵀ
 /// (the mean squared error matrix: variance plus squared bias). `cov_en` is that matrix;
-/// `posterior_cov_en` is Σ_i alone, about `map_estimate_w`. Where the Corrector agrees with the
-/// model (kDriftModel weights, at the anchors) the two coincide; between sparse anchors, where
-/// the paper's weighting spreads the misfit differently from the model, the bias term widens
-/// the ellipse along the direction the two estimates disagree.
+/// `posterior_cov_en` is Σ_i alone (both × region_factor, below), about `map_estimate_w`. Where the
+/// Corrector agrees with the model (kDriftModel weights, at the anchors) the two coincide; between
+/// sparse anchors, where the paper's weighting spreads the misfit differently from the model, the
+/// bias term widens the ellipse along the direction the two estimates disagree.
 ///
 /// ## The drift level and the anchors' quality
 /// A VO's drift differs from the model's nominal numbers by a factor (camera, texture, speed),
@@ -59,6 +59,21 @@
 /// model the two estimates agree; where they differ, the prediction is the one the ellipses are
 /// judged by. An anchor that nothing else predicts (the last one, where the path ends soon
 /// after it: C_j − Σ_c,j → 0) is not tested.
+///
+/// ## Regions with an estimated drift factor
+/// k_d is itself an estimate, from ν = 2·n tests (n anchors predicted, 2 axes each; the fit's
+/// drift redundancy when the fit alone sets it), and with ~15 anchors it is off by ±25 % in
+/// variance from one path to the next. Plugging such an estimate into χ²₂ regions makes them too
+/// small on average: where k_d came out low the region loses more than it gains where it came
+/// out high. The exact region of a new error whose covariance is known up to an estimated factor
+/// is Fisher's (the 2D form of the Student interval; Koch, "Parameter Estimation and Hypothesis
+/// Testing in Linear Models", 1999, §4.2): eᵀΣ⁻¹e/2 ~ F(2, ν), whose quantile has the closed form
+///     F⁻¹(p; 2, ν) = (ν/2)·((1 − p)^(−2/ν) − 1).
+/// posterior_cov_en is multiplied by region_factor = 2·F⁻¹(0.95; 2, ν) / χ²₂⁻¹(0.95), so the
+/// χ²₂ 95 % ellipse every reader draws from it (5.991) is that exact region: ×1.12 at ν = 28,
+/// ×1.04 at ν = 100, → 1 as ν grows; cov_en is that plus d·dᵀ (the offset is no estimate of
+/// the factor's). At another level p, scale by 2·F⁻¹(p; 2, ν) / χ²₂⁻¹(p) instead (report.json
+/// gives ν as `variance_dof`).
 /// Nothing here changes the corrected path.
 
 #include <Eigen/Core>
@@ -96,6 +111,9 @@ struct PathUncertaintyOptions {
   /// An anchor whose tag rows have less redundancy than this (per axis) is not predicted: the
   /// others do not constrain it, and its residual is at the solver's tolerance.
   double min_anchor_redundancy = 1e-6;
+  /// Widen the covariances to the exact 95 % regions of an estimated drift factor (see
+  /// "Regions with an estimated drift factor"); off: the plug-in estimate (region_factor 1).
+  bool estimated_factor_regions = true;
   int num_threads = 1;
 };
 
@@ -106,7 +124,8 @@ struct PathUncertainty {
   /// W (m²): posterior_cov_en + d·dᵀ, d the horizontal offset of the Corrector's centre from
   /// map_estimate_w (see "About the corrected path").
   std::vector<Eigen::Matrix2d> cov_en;
-  /// Per keyframe index: horizontal posterior covariance about map_estimate_w (m²).
+  /// Per keyframe index: horizontal posterior covariance about map_estimate_w (m²), times
+  /// region_factor.
   std::vector<Eigen::Matrix2d> posterior_cov_en;
   /// Per keyframe index: the camera centre in W at the uncertainty graph's optimum (the
   /// drift model's own estimate; the corrected path itself is the Corrector's).
@@ -117,6 +136,11 @@ struct PathUncertainty {
   double fit_drift_factor = 1.0;   ///< k_d of the variance-component estimate (the fit alone)
   double prediction_factor = 1.0;  ///< mean leave-one-out χ²/2 of the anchors at drift_factor
   int predicted_anchors = 0;       ///< anchors that entered prediction_factor
+  /// Degrees of freedom ν of drift_factor (2·predicted_anchors, or the fit's drift redundancy;
+  /// +∞ when it is not estimated) and the factor posterior_cov_en (and with it cov_en) carries
+  /// for it (see "Regions with an estimated drift factor").
+  double variance_dof = std::numeric_limits<double>::infinity();
+  double region_factor = 1.0;
   /// Per correspondence (Corrector::correspondences() order): t_j, its horizontal tag against
   /// where the chain and the other anchors put it, as a χ² with 2 degrees of freedom at the
   /// final factors (> 13.8: outside the 99.9 % region); NaN where the others do not predict it.
@@ -131,6 +155,15 @@ struct PathUncertainty {
 };
 
 namespace detail {
+
+/// χ²₂-ellipse scale that makes the level-p ellipse of a 2D error, whose covariance is known up
+/// to a factor estimated with ν degrees of freedom, the exact (Fisher) region:
+/// 2·F⁻¹(p; 2, ν) / χ²₂⁻¹(p), with F⁻¹(p; 2, ν) = (ν/2)·((1 − p)^(−2/ν) − 1). 1 for ν = ∞.
+inline double fisher_region_factor(double nu, double p = 0.95) {
+  if (!(nu < std::numeric_limits<double>::infinity())) return 1.0;
+  const double chi2 = -2.0 * std::log1p(-p);
+  return nu * std::expm1(-2.0 / nu * std::log1p(-p)) / chi2;
+}
 
 /// Drift-model covariance (diagonal) of a relative Sim(3) measurement dS, in map units.
 inline Eigen::Matrix<double, 7, 7> drift_covariance(const DriftModel& model, const lie::Sim3d& dS,
@@ -386,10 +419,21 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
   }
   out.anchor_factor = k_a;
   out.drift_factor = k_d;
+  if (options.estimate_variance_factors) {  // else k_d is the model's: no estimate, ν = ∞
+    const bool predicted =
+        options.predictive_drift_factor && out.predicted_anchors >= options.min_predicted_anchors;
+    if (predicted)
+      out.variance_dof = 2.0 * out.predicted_anchors;
+    else if (out.drift_redundancy >= options.min_redundancy)
+      out.variance_dof = out.drift_redundancy;
+  }
+  out.region_factor = options.estimated_factor_regions && out.variance_dof > 0
+                          ? detail::fisher_region_factor(out.variance_dof)
+                          : 1.0;
   out.cov_en.resize(nk);
   out.posterior_cov_en.resize(nk);
   for (int i = 0; i < nk; ++i) {
-    out.posterior_cov_en[i] = centre_cov(S[i]).topLeftCorner<2, 2>();
+    out.posterior_cov_en[i] = out.region_factor * centre_cov(S[i]).topLeftCorner<2, 2>();
     out.map_estimate_w.push_back(S[i].inverse().translation());
     const Eigen::Vector2d d = (corrector.keyframe_center_w(i) - out.map_estimate_w[i]).head<2>();
     out.cov_en[i] = out.posterior_cov_en[i] + d * d.transpose();
