@@ -24,10 +24,11 @@
 /// distance d_i = c_i − m_i away from it. What the user needs is the spread of the truth x_i
 /// about c_i: under the posterior x_i ~ N(m_i, Σ_i), E[(x_i − c_i)(x_i − c_i)ᵀ] = Σ_i + d_i·d_iᵀ
 /// (the mean squared error matrix: variance plus squared bias). `cov_en` is that matrix;
-/// `posterior_cov_en` is Σ_i alone (both × region_factor, below), about `map_estimate_w`. Where the
-/// Corrector agrees with the model (kDriftModel weights, at the anchors) the two coincide; between
-/// sparse anchors, where the paper's weighting spreads the misfit differently from the model, the
-/// bias term widens the ellipse along the direction the two estimates disagree.
+/// `posterior_cov_en` is Σ_i alone, about `map_estimate_w` (Σ_i in both widened by
+/// region_factor, below). Where the Corrector agrees with the model (kDriftModel weights, at the
+/// anchors) the two coincide; between sparse anchors, where the paper's weighting spreads the
+/// misfit differently from the model, the bias term widens the ellipse along the direction the
+/// two estimates disagree.
 ///
 /// ## The drift level and the anchors' quality
 /// A VO's drift differs from the model's nominal numbers by a factor (camera, texture, speed),
@@ -66,12 +67,13 @@
 /// variance from one path to the next. Plugging such an estimate into χ²₂ regions makes them too
 /// small on average: where k_d came out low the region loses more than it gains where it came
 /// out high. The exact region of a new error whose covariance is known up to an estimated factor
-/// is Fisher's (the 2D form of the Student interval; Koch, "Parameter Estimation and Hypothesis
-/// Testing in Linear Models", 1999, §4.2): eᵀΣ⁻¹e/2 ~ F(2, ν), whose quantile has the closed form
+/// is Fisher's (the 2D form of the Student interval; e.g. Koch, "Parameter Estimation and
+/// Hypothesis Testing in Linear Models", 1999): eᵀΣ⁻¹e/2 ~ F(2, ν), whose quantile has the
+/// closed form
 ///     F⁻¹(p; 2, ν) = (ν/2)·((1 − p)^(−2/ν) − 1).
 /// posterior_cov_en is multiplied by region_factor = 2·F⁻¹(0.95; 2, ν) / χ²₂⁻¹(0.95), so the
 /// χ²₂ 95 % ellipse every reader draws from it (5.991) is that exact region: ×1.12 at ν = 28,
-/// ×1.04 at ν = 100, → 1 as ν grows; cov_en is that plus d·dᵀ (the offset is no estimate of
+/// ×1.03 at ν = 100, → 1 as ν grows; cov_en is that plus d·dᵀ (the offset is no estimate of
 /// the factor's). At another level p, scale by 2·F⁻¹(p; 2, ν) / χ²₂⁻¹(p) instead (report.json
 /// gives ν as `variance_dof`).
 /// Nothing here changes the corrected path.
