@@ -262,6 +262,48 @@ TEST_CASE("Path uncertainty is calibrated when the VO drifts as the model says",
   CHECK(k_est[k_est.size() / 2] < 1.35 * k_true);
 }
 
+TEST_CASE("The path's uncertainty is the same whatever the map's unit, origin and orientation",
+          "[correction][uncertainty][invariance]") {
+  // trajectory.csv's sd_east / sd_north / cov_en are outputs too: a similarity of the input map
+  // may change them by no more than the path itself (1e-6 relative, issue 24 item 1).
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const sim::KittiSequence seq = sim::load_kitti_sequence(
+      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
+  sim::SimOptions so = sim::SimOptions::kitti("02", 5);
+  so.last_frame = 1000;
+  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const auto corr = sim::kitti_correspondences(s, 100);
+  auto uncertainty = [&](const map::Map& m, const std::vector<map::Correspondence>& c) {
+    correction::CorrectorOptions opt;  // the defaults of geodrift correct: metric, Ours
+    correction::Corrector corrector(opt);
+    correction::replay(m, c, &corrector);
+    REQUIRE(corrector.initialized());
+    const correction::PathUncertainty u = correction::estimate_path_uncertainty(corrector);
+    REQUIRE(u.ok);
+    return u;
+  };
+  const correction::PathUncertainty ref = uncertainty(s.map, corr);
+  REQUIRE(ref.predicted_anchors >= 5);
+  std::mt19937 rng(25);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const double k : {1e-3, 1e3}) {
+    const lie::Sim3d G(lie::SO3d::exp(M_PI * Eigen::Vector3d(u(rng), u(rng), u(rng))),
+                       1e3 * k * Eigen::Vector3d(u(rng), u(rng), u(rng)), k);
+    const correction::PathUncertainty out =
+        uncertainty(transform_map(s.map, G), transform_corr(corr, k));
+    REQUIRE(out.cov_en.size() == ref.cov_en.size());
+    double worst = 0;  // largest change of a covariance entry relative to that keyframe's trace
+    for (std::size_t i = 0; i < ref.cov_en.size(); ++i)
+      worst = std::max(
+          worst, (out.cov_en[i] - ref.cov_en[i]).cwiseAbs().maxCoeff() / ref.cov_en[i].trace());
+    INFO("map scale x" << k << ": largest relative covariance change " << worst << ", k_d "
+                       << out.drift_factor << " against " << ref.drift_factor);
+    CHECK(worst < 1e-6);  // measured: 8e-8 (x1e-3), 1.4e-7 (x1e3)
+    CHECK(out.drift_factor == Approx(ref.drift_factor).epsilon(1e-6));  // measured: 2e-9
+    CHECK(out.region_factor == Approx(ref.region_factor).epsilon(1e-12));
+  }
+}
+
 TEST_CASE("An anchor's prediction chi2 is its leave-one-out test in the re-solved graph",
           "[correction][uncertainty]") {
   // The closed form t_j = eᵀ(C − Σ_c)⁻¹e from the fit with every anchor must equal the test of
