@@ -7,6 +7,7 @@
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
+#include "support/kitti_sim.hpp"
 
 using namespace geodrift;
 
@@ -27,12 +28,7 @@ double mean_2d_error(const sim::SimulatedSequence& s, const std::vector<map::Cor
 
 TEST_CASE("With an anchor every 10 frames the window is lengthened and PGO follows the anchors",
           "[correction][sim]") {
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("02", 3);
-  so.last_frame = 1200;
-  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 3, 1200);
   const auto corr = sim::kitti_correspondences(s, 10);
   REQUIRE(corr.size() >= 90);
 

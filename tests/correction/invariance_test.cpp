@@ -15,6 +15,7 @@
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
 #include "support/kitti.hpp"
+#include "support/kitti_sim.hpp"
 
 using namespace geodrift;
 
@@ -71,12 +72,7 @@ TEST_CASE(
     "With the default (metric) and drift-model weights the corrected path is the same whatever "
     "the map's unit, origin and orientation",
     "[correction][invariance]") {
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("02", 5);
-  so.last_frame = 1000;
-  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 5, 1000);
   const auto corr = sim::kitti_correspondences(s, 100);
   REQUIRE(corr.size() >= 10);
 
@@ -266,12 +262,7 @@ TEST_CASE("The path's uncertainty is the same whatever the map's unit, origin an
           "[correction][uncertainty][invariance]") {
   // trajectory.csv's sd_east / sd_north / cov_en are outputs too: a similarity of the input map
   // may change them by no more than the path itself (1e-6 relative, issue 24 item 1).
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("02", 5);
-  so.last_frame = 1000;
-  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 5, 1000);
   const auto corr = sim::kitti_correspondences(s, 100);
   auto uncertainty = [&](const map::Map& m, const std::vector<map::Correspondence>& c) {
     correction::CorrectorOptions opt;  // the defaults of geodrift correct: metric, Ours
@@ -388,10 +379,7 @@ TEST_CASE("Drift-model weights converge where they once diverged (08, trajectory
   // diverged (mean 2D error 4.8e14 m). With the solver's setting for long Sim(3) chains
   // (geodesic acceleration, backtracking, little initial damping) each window converges in
   // 4-11 iterations: 6.61 m.
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/08.txt", dir + "/calib_seq04-12.txt", dir + "/times/08.txt");
-  const sim::SimulatedSequence s = sim::simulate(seq, sim::SimOptions::kitti("08", 5));
+  const sim::SimulatedSequence s = test::simulate_kitti("08", 5);
   const auto corr = sim::kitti_correspondences(s, 300);
   correction::CorrectorOptions opt;
   opt.mode = correction::Mode::kOurs;

@@ -1,8 +1,11 @@
 // The Corrector on the simulated KITTI 02 drift (issue 4, item 7): shipped data in data/kitti.
+#include "support/kitti_sim.hpp"
+
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <string>
 
 #include "geodrift/correction/replay.hpp"
@@ -51,10 +54,7 @@ Outcome run(const sim::SimulatedSequence& s, const std::vector<map::Corresponden
 
 TEST_CASE("On simulated KITTI 02 at interval 100, PGO corrects the drift and BA refines it",
           "[correction][sim]") {
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-  const sim::SimulatedSequence s = sim::simulate(seq, sim::SimOptions::kitti("02", 1));
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 1);
   std::vector<sim::GeoView> views;
   const auto corr = sim::kitti_correspondences(s, 100, &views);
   REQUIRE(corr.size() >= 40);
@@ -97,12 +97,7 @@ TEST_CASE("On a simulated stretch of KITTI 08 at interval 300, BA after PGO does
   // frames 0-1500 of the same seed Ours measured 5.93 m against INIT+PGO 4.95 m (+20 %), with
   // full batch also above PGO (the simulator's pixels come from the drifted map, so BA pulls
   // toward the drifted shape between anchors; docs/RESULTS.md).
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/08.txt", dir + "/calib_seq04-12.txt", dir + "/times/08.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("08", 21);
-  so.last_frame = 2000;
-  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const sim::SimulatedSequence s = test::simulate_kitti("08", 21, 2000);
   const auto corr = sim::kitti_correspondences(s, 300);
   REQUIRE(corr.size() >= 9);
 
@@ -127,12 +122,8 @@ TEST_CASE("On simulated KITTI 08 at interval 100, INIT+BA follows the anchors wi
   // (plain least squares, χ² gate, least squares; CorrectorOptions::ba_two_pass) follows the
   // anchors. Reduced (CI): frames 0-1500 of the same seed (1.8 m against 38 m; on that stretch
   // seed 2 still diverges with both: INIT+BA stays fragile, 22.6 m against 28.6 m).
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/08.txt", dir + "/calib_seq04-12.txt", dir + "/times/08.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("08", 1);
-  if (reduced()) so.last_frame = 1500;
-  const sim::SimulatedSequence s = sim::simulate(seq, so);
+  const sim::SimulatedSequence s =
+      test::simulate_kitti("08", 1, reduced() ? 1500 : std::numeric_limits<int>::max());
   const auto corr = sim::kitti_correspondences(s, 100);
   REQUIRE(corr.size() >= 14);
 

@@ -13,19 +13,11 @@
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
+#include "support/kitti_sim.hpp"
 
 using namespace geodrift;
 
 namespace {
-
-sim::SimulatedSequence simulate_02(unsigned seed, int last_frame) {
-  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-  const sim::KittiSequence seq = sim::load_kitti_sequence(
-      dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-  sim::SimOptions so = sim::SimOptions::kitti("02", seed);
-  so.last_frame = last_frame;
-  return sim::simulate(seq, so);
-}
 
 struct Run {
   double mean_2d = 0;
@@ -49,7 +41,7 @@ Run correct(const sim::SimulatedSequence& s, const std::vector<map::Corresponden
 
 TEST_CASE("Anchors hundreds of metres off are rejected and the path stays near the clean one",
           "[correction][robust]") {
-  const sim::SimulatedSequence s = simulate_02(3, 2500);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 3, 2500);
   const auto corr = sim::kitti_correspondences(s, 100);
   REQUIRE(corr.size() >= 20);
   // Every 10th anchor after INIT's four: 10 % wrong, by 200-1000 m (a retrieval mistake).
@@ -135,7 +127,7 @@ TEST_CASE("Screening's cost on a clean run, over seeds", "[correction][robust]")
   // is its worst case measured: 1.11x over 5 seeds (known, documented; the bound guards it).
   double sum_screened = 0, sum_unscreened = 0;
   for (unsigned seed = 1; seed <= 5; ++seed) {
-    const sim::SimulatedSequence s = simulate_02(seed, 2500);
+    const sim::SimulatedSequence s = test::simulate_kitti("02", seed, 2500);
     const auto corr = sim::kitti_correspondences(s, 100);
     correction::AnchorScreening sc;
     const Run unscreened = correct(s, corr, /*gate=*/false);
@@ -154,7 +146,7 @@ TEST_CASE("Screening's cost on a clean run, over seeds", "[correction][robust]")
 
 TEST_CASE("Screening leaves out wrong anchors, INIT's among them, and keeps the right ones",
           "[correction][robust]") {
-  const sim::SimulatedSequence s = simulate_02(3, 2500);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 3, 2500);
   const auto corr = sim::kitti_correspondences(s, 100);
   REQUIRE(corr.size() >= 20);
   correction::AnchorScreening sc;
@@ -202,7 +194,7 @@ TEST_CASE("Screening leaves out wrong anchors, INIT's among them, and keeps the 
 
 TEST_CASE("Screening does not depend on the map's unit, origin or orientation",
           "[correction][robust]") {
-  const sim::SimulatedSequence s = simulate_02(2, 1500);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 2, 1500);
   auto corr = sim::kitti_correspondences(s, 100);
   corr = shifted(corr, {5, 9}, 50, 100, 3);
   const auto a = correction::screen_anchors(s.map.keyframes, corr);
@@ -239,7 +231,7 @@ TEST_CASE("Screening does not depend on the map's unit, origin or orientation",
 
 TEST_CASE("Screening reports what it cannot test and rejects what it cannot read",
           "[correction][robust]") {
-  const sim::SimulatedSequence s = simulate_02(1, 600);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 1, 600);
   auto corr = sim::kitti_correspondences(s, 100);
   REQUIRE(corr.size() >= 3);
   corr.resize(2);
@@ -300,7 +292,7 @@ std::vector<map::Correspondence> with_siblings(const sim::SimulatedSequence& s,
 
 TEST_CASE("Geo-tags seen from several keyframes: a wrong one leaves with all its localizations",
           "[correction][robust]") {
-  const sim::SimulatedSequence s = simulate_02(3, 2500);
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 3, 2500);
   const auto tags = sim::kitti_correspondences(s, 100);
   REQUIRE(tags.size() >= 20);
   // 10 % of the geo-tags off by 50-200 m (one of them among the first four), in every
