@@ -4,6 +4,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <filesystem>
@@ -96,12 +97,16 @@ TEST_CASE("simulate killed at random moments leaves --out absent, as it was, or 
   const auto kill_at_random = [&](const std::vector<std::string>& args, int i) {
     const int sig = kSignals[i % 3];
     const double delay = when(rng);
+    // Staging folders an earlier SIGKILL left (removed only by a run that gets far enough).
+    const auto before = staging_folders(t.path());
     const pid_t pid = geodrift::test::spawn_cli(GEODRIFT_CLI_EXE, args, t.file("log.txt"));
     std::this_thread::sleep_for(std::chrono::duration<double>(delay));
     ::kill(pid, sig);
     const int code = geodrift::test::wait_cli(pid);
     INFO("run " << i << ": signal " << sig << " after " << delay << " s, exit " << code);
-    const auto left = staging_folders(t.path());
+    std::vector<std::string> left;  // this run's own staging folder, if it survived
+    for (const auto& f : staging_folders(t.path()))
+      if (std::find(before.begin(), before.end(), f) == before.end()) left.push_back(f);
     if (code == 0) {
       ++finished;
     } else if (sig == SIGKILL) {
