@@ -59,8 +59,9 @@ options
   --keyframe-step K   without --map: every K-th pose is a keyframe (default 1; the last pose is
                       always one); the others are carried along by their raw relative pose
   --weights W         pose-graph edge weights: metric (default) | paper | drift.
-                      metric: the paper's lambda1 = lambda2 = 1e5 on every Sim(3) component,
-                      translation in metres at INIT's scale, each anchor weighted by its
+                      metric: the paper's lambda1 = lambda2 = 1e5 on rotation and scale, a
+                      keyframe pair's translation to 1 % of its length (the VO's direction
+                      error; metres at INIT's scale), each anchor weighted by its
                       sigma_m (1/sigma^2; lambda3 = 1 for views localized by `run`): the
                       result does not depend on the map's unit.
                       paper: the same in map units (Iwami et al. verbatim): the result changes

@@ -63,9 +63,9 @@ constexpr const char* kHelp =
     "  --methods LIST     run only these methods, of init, init+ba, init+pgo, ours, batch,\n"
     "                     piecewise, piecewise3d (default all)\n"
     "  --weights W        PGO edge weights: metric (default; the paper's lambda1 = lambda2 =\n"
-    "                     1e5, lambda3 = 1, translation in metres) | paper (in map units) |\n"
-    "                     drift (the VO drift model); metric and drift do not depend on the\n"
-    "                     map's unit\n"
+    "                     1e5, lambda3 = 1, a step's translation to 1 % of its length) |\n"
+    "                     paper (in map units) | drift (the VO drift model); metric and drift\n"
+    "                     do not depend on the map's unit\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
 
 struct Method {
@@ -438,7 +438,8 @@ int run_experiment(int argc, char** argv) {
           "the wrong ones would give: the floor of any screening).\n\n";
   md << "PGO edge weights: "
      << (setup.weights == correction::CorrectorOptions::EdgeWeights::kPaperMetric
-             ? "metric (the paper's λ1 = λ2 = 1e5, λ3 = 1; translation in metres)"
+             ? "metric (the paper's λ1 = λ2 = 1e5, λ3 = 1; e1 translation to 1 % of the step, "
+               "metres)"
          : setup.weights == correction::CorrectorOptions::EdgeWeights::kPaper
              ? "paper (λ1 = λ2 = 1e5, λ3 = 1, in map units)"
              : "drift model")

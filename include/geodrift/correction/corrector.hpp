@@ -136,12 +136,19 @@ struct CorrectorOptions {
   ///    anchor intervals of 100-200 frames and worse at 300-500 on 08. Its PGO windows run
   ///    with geodesic acceleration and backtracking (run_pgo), without which LM from INIT's
   ///    state stopped at the iteration limit far from the optimum on some seeds.
-  ///  - kPaperMetric (default): the paper's λ1 = λ2 = 1e5 on e1/e2 and λ3 = 1 on e3, with the
-  ///    translation part of e1/e2 measured in METRES at INIT's scale (map units divided by
-  ///    map_per_metre()) instead of map units. A metre of translation error then weighs as
-  ///    much as a radian of rotation and a unit of log-scale, whatever unit the VO chose, so
-  ///    the corrected path does not depend on the map's unit or frame (INIT's similarity
-  ///    scales with the map; rotation and log-scale errors do not). e3 of a view localized in
+  ///  - kPaperMetric (default): the paper's λ1 = λ2 = 1e5 on the rotation and log-scale of
+  ///    e1/e2 and λ3 = 1 on e3. The translation of an e1 edge has the SD of a monocular VO's
+  ///    direction-of-motion error over the pair's own length, drift.direction_sd_rad · d
+  ///    (1 % of d; d in metres at INIT's scale), the translation of e2 the SD 1/√λ2 in METRES
+  ///    (map units divided by map_per_metre()). Both follow the map's unit, so the corrected
+  ///    path does not depend on the map's unit or frame (INIT's similarity scales with the map;
+  ///    rotation and log-scale errors do not). Until 2026-12-06 e1's translation also had
+  ///    1/√λ1 m = 3.2 mm whatever the length: a VO's step direction known to 0.06° over a 3 m
+  ///    step. The simulator's drift is a smooth warp without per-step translation noise, so it
+  ///    did not tell the two apart (every cell of docs/RESULTS.md equal or up to 0.05 m lower
+  ///    with 1 %); our own VO on the rendered 02 stretch, with a localized view every ~3
+  ///    keyframes, ended at 1.19 m mean 2D error with 3.2 mm and 0.87 m with 1 %
+  ///    (docs/correction_model.md). e3 of a view localized in
   ///    the map (the paper's geo-tagged images) keeps λ3 = 1: it stands for a view ~1 m off
   ///    beyond its tag, what a view localized in a drifted map is (PnP's own covariance
   ///    underrates it 8-10×: weight_by_localization). e3 of a direct position fix of the
@@ -1155,10 +1162,15 @@ class Corrector {
       lie::Sim3d* Sj = node(j);
       // ΔS_ij from the poses before optimisation: e1 = 0 at the start.
       const lie::Sim3d dS = *Sj * Si->inverse();
-      if (metric)
-        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial, info1, Si,
+      if (metric) {
+        // The translation's SD is the VO's direction error over the pair's own length,
+        // DriftModel::direction_sd_rad · d (in map units), not 1/√λ1 metres whatever the length.
+        Eigen::Matrix<double, 7, 7> info = info1;
+        const double t = edge_sd(dS, map_per_metre())[4];
+        info.diagonal().tail<3>().setConstant(1.0 / (t * t));
+        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial, info, Si,
                                    Sj);
-      else if (paper)
+      } else if (paper)
         problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial,
                                    options_.lambda1, Si, Sj);
       else

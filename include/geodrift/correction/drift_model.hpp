@@ -14,7 +14,8 @@
 /// "Correction" 5). The paper's weighting (λ1 = λ2 = 1e5 on all seven components, in map units)
 /// weighs a map unit of translation against a radian and a unit of log-scale, so its result
 /// changes with the map's unit; it stays available as CorrectorOptions::EdgeWeights::kPaper
-/// (kPaperMetric, the default, measures their translation in metres instead).
+/// (kPaperMetric, the default, keeps λ on rotation and log-scale and gives e1's translation
+/// this model's direction error, direction_sd_rad · d).
 
 #include <Eigen/Core>
 #include <algorithm>
