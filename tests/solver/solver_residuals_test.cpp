@@ -143,6 +143,84 @@ TEMPLATE_TEST_CASE("Pose prior and camera-centre prior Jacobians match central d
   }
 }
 
+TEST_CASE("Local-scale Sim3 edge and its Gauss-Markov links match central differences",
+          "[solver][jacobian]") {
+  using G = lie::Sim3d;
+  using Res = solver::RelativeSim3LocalScaleResidual;
+  std::mt19937 rng(45);
+  std::normal_distribution<double> n(0.0, 0.3);
+  std::uniform_real_distribution<double> rho(0.0, 0.999);
+  for (int trial = 0; trial < kSamples; ++trial) {
+    const G S_i = test::random_element<G>(rng);
+    const G dS = test::random_element<G>(rng);
+    const G S_j = G::exp(-moderate_tangent<G>(rng, trial)) * dS * S_i;
+    const Eigen::Matrix<double, 1, 1> u_i(n(rng)), u_j(n(rng));
+    const Res res{dS};
+    Res::Vec r;
+    Res::Mat J_i, J_j;
+    Res::MatU J_ui, J_uj;
+    REQUIRE(res(S_i, S_j, u_i, u_j, &r, &J_i, &J_j, &J_ui, &J_uj));
+    // The pose part is RelativePoseResidual's; the offsets only move the log-scale.
+    solver::RelativePoseResidual<G>::Vec r0;
+    solver::RelativePoseResidual<G>{dS}(S_i, S_j, &r0);
+    CHECK(std::abs(r[3] - (r0[3] - (u_i[0] - u_j[0]))) <= 1e-12 * (1.0 + std::abs(r0[3])));
+    const auto r_of_i = [&](const G& S) {
+      Res::Vec v;
+      res(S, S_j, u_i, u_j, &v);
+      return Eigen::VectorXd(v);
+    };
+    const auto r_of_j = [&](const G& S) {
+      Res::Vec v;
+      res(S_i, S, u_i, u_j, &v);
+      return Eigen::VectorXd(v);
+    };
+    const auto r_of_ui = [&](const Eigen::Matrix<double, 1, 1>& u) {
+      Res::Vec v;
+      res(S_i, S_j, u, u_j, &v);
+      return Eigen::VectorXd(v);
+    };
+    const auto r_of_uj = [&](const Eigen::Matrix<double, 1, 1>& u) {
+      Res::Vec v;
+      res(S_i, S_j, u_i, u, &v);
+      return Eigen::VectorXd(v);
+    };
+    INFO("trial " << trial << " r = " << r.transpose());
+    const double floor = test::rounding_floor(fscale(r) + 1e4, 1e-6);
+    CHECK(test::near(J_i, test::numeric_jacobian(r_of_i, S_i), 1e-6, floor));
+    CHECK(test::near(J_j, test::numeric_jacobian(r_of_j, S_j), 1e-6, floor));
+    CHECK(test::near(J_ui, test::numeric_jacobian_vector(r_of_ui, u_i), 1e-6, floor));
+    CHECK(test::near(J_uj, test::numeric_jacobian_vector(r_of_uj, u_j), 1e-6, floor));
+
+    const solver::LocalScaleLinkResidual link{rho(rng)};
+    solver::LocalScaleLinkResidual::Vec l;
+    solver::LocalScaleLinkResidual::Mat J_prev, J_u;
+    REQUIRE(link(u_i, u_j, &l, &J_prev, &J_u));
+    CHECK(std::abs(l[0] - (u_j[0] - link.rho * u_i[0])) <= 1e-15);
+    const auto l_of_prev = [&](const Eigen::Matrix<double, 1, 1>& u) {
+      solver::LocalScaleLinkResidual::Vec v;
+      link(u, u_j, &v);
+      return Eigen::VectorXd(v);
+    };
+    const auto l_of_u = [&](const Eigen::Matrix<double, 1, 1>& u) {
+      solver::LocalScaleLinkResidual::Vec v;
+      link(u_i, u, &v);
+      return Eigen::VectorXd(v);
+    };
+    CHECK(test::near(J_prev, test::numeric_jacobian_vector(l_of_prev, u_i), 1e-8, 1e-9));
+    CHECK(test::near(J_u, test::numeric_jacobian_vector(l_of_u, u_j), 1e-8, 1e-9));
+    solver::LocalScalePriorResidual::Vec p;
+    solver::LocalScalePriorResidual::Mat J_p;
+    REQUIRE(solver::LocalScalePriorResidual{}(u_i, &p, &J_p));
+    CHECK(p[0] == u_i[0]);
+    const auto p_of_u = [&](const Eigen::Matrix<double, 1, 1>& u) {
+      solver::LocalScalePriorResidual::Vec v;
+      solver::LocalScalePriorResidual{}(u, &v);
+      return Eigen::VectorXd(v);
+    };
+    CHECK(test::near(J_p, test::numeric_jacobian_vector(p_of_u, u_i), 1e-8, 1e-9));
+  }
+}
+
 TEST_CASE("Reprojection residual Jacobians match central differences", "[solver][jacobian]") {
   std::mt19937 rng(44);
   std::uniform_real_distribution<double> u(-1.0, 1.0), depth(0.5, 80.0), px(0.0, 1000.0);

@@ -60,6 +60,69 @@ struct RelativePoseResidual {
   }
 };
 
+/// Sim(3) relative-pose edge whose log-scale also sees a local scale offset per keyframe:
+///   r = log(dS_ij · S_i · S_j⁻¹) − (u_i − u_j)·e_σ,
+/// u_k ∈ R a log-scale offset of keyframe k (e_σ: the σ axis of the tangent (ω, σ, ν)). The
+/// edge then charges only the part of the relative scale change that is not explained by the
+/// offsets, whose own prior (LocalScaleLinkResidual) says how they vary along the path: a
+/// random walk (this edge's σ information) plus a local, mean-reverting scale error (the
+/// offsets), as correction/corrector.hpp's CorrectorOptions::local_scale_sd describes.
+///   J_r_Si, J_r_Sj as RelativePoseResidual;  J_r_ui = −e_σ,  J_r_uj = +e_σ.
+struct RelativeSim3LocalScaleResidual {
+  static constexpr int kNumResiduals = 7;
+  using Vec = Eigen::Matrix<double, 7, 1>;
+  using Mat = Eigen::Matrix<double, 7, 7>;
+  using MatU = Eigen::Matrix<double, 7, 1>;
+
+  lie::Sim3d dS_ij;  ///< measurement, as RelativePoseResidual::dS_ij
+
+  template <typename U>
+  bool operator()(const lie::Sim3d& S_i, const lie::Sim3d& S_j, const U& u_i, const U& u_j, Vec* r,
+                  Mat* J_r_Si = nullptr, Mat* J_r_Sj = nullptr, MatU* J_r_ui = nullptr,
+                  MatU* J_r_uj = nullptr) const {
+    if (!RelativePoseResidual<lie::Sim3d>{dS_ij}(S_i, S_j, r, J_r_Si, J_r_Sj)) return false;
+    (*r)[3] -= u_i[0] - u_j[0];
+    if (J_r_ui) *J_r_ui = -MatU::Unit(3);
+    if (J_r_uj) *J_r_uj = MatU::Unit(3);
+    return true;
+  }
+};
+
+/// A first-order Gauss–Markov (Ornstein–Uhlenbeck) link between consecutive local scale
+/// offsets: r = u_k − ρ·u_{k−1}, ρ = exp(−d/L) for keyframes d apart and a correlation length
+/// L; with information 1/(s²·(1 − ρ²)) the offsets are stationary with SD s.
+///   J_r_uprev = −ρ,  J_r_u = 1.
+struct LocalScaleLinkResidual {
+  static constexpr int kNumResiduals = 1;
+  using Vec = Eigen::Matrix<double, 1, 1>;
+  using Mat = Eigen::Matrix<double, 1, 1>;
+
+  double rho = 0.0;  ///< exp(−d/L), in [0, 1)
+
+  template <typename U>
+  bool operator()(const U& u_prev, const U& u, Vec* r, Mat* J_r_uprev = nullptr,
+                  Mat* J_r_u = nullptr) const {
+    (*r)[0] = u[0] - rho * u_prev[0];
+    if (J_r_uprev) (*J_r_uprev)(0, 0) = -rho;
+    if (J_r_u) (*J_r_u)(0, 0) = 1.0;
+    return true;
+  }
+};
+
+/// Zero-mean prior on one local scale offset (the first keyframe's): r = u,  J_r_u = 1.
+struct LocalScalePriorResidual {
+  static constexpr int kNumResiduals = 1;
+  using Vec = Eigen::Matrix<double, 1, 1>;
+  using Mat = Eigen::Matrix<double, 1, 1>;
+
+  template <typename U>
+  bool operator()(const U& u, Vec* r, Mat* J_r_u = nullptr) const {
+    (*r)[0] = u[0];
+    if (J_r_u) (*J_r_u)(0, 0) = 1.0;
+    return true;
+  }
+};
+
 /// Prior on one pose  r = log(S · S_prior⁻¹),  J_r_S = Jl⁻¹(r).
 template <typename Group>
 struct PosePriorResidual {
