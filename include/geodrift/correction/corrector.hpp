@@ -145,9 +145,9 @@ struct CorrectorOptions {
   ///    rotation and log-scale errors do not). Until 2026-12-06 e1's translation also had
   ///    1/√λ1 m = 3.2 mm whatever the length: a VO's step direction known to 0.06° over a 3 m
   ///    step. The simulator's drift is a smooth warp without per-step translation noise, so it
-  ///    did not tell the two apart (every cell of docs/RESULTS.md equal or up to 0.05 m lower
-  ///    with 1 %); our own VO on the rendered 02 stretch, with a localized view every ~3
-  ///    keyframes, ended at 1.19 m mean 2D error with 3.2 mm and 0.87 m with 1 %
+  ///    did not tell the two apart (every Ours and INIT+PGO cell of docs/RESULTS.md equal or up to
+  ///    0.05 m lower with 1 %); our own VO on the rendered 02 stretch, with a localized view every
+  ///    ~3 keyframes, ended at 1.19 m mean 2D error with 3.2 mm and 0.87 m with 1 %
   ///    (docs/correction_model.md). e3 of a view localized in
   ///    the map (the paper's geo-tagged images) keeps λ3 = 1: it stands for a view ~1 m off
   ///    beyond its tag, what a view localized in a drifted map is (PnP's own covariance
@@ -164,7 +164,32 @@ struct CorrectorOptions {
   ///    monocular map's unit is arbitrary: ORB-SLAM sets it from the first median depth).
   enum class EdgeWeights { kDriftModel, kPaper, kPaperMetric };
   EdgeWeights edge_weights = EdgeWeights::kPaperMetric;
-  DriftModel drift;      ///< the VO's error model (kDriftModel)
+  DriftModel drift;  ///< the VO's error model (kDriftModel)
+  /// kPaperMetric: SD of the local, mean-reverting part of a monocular VO's scale error
+  /// (0 = none, the paper's chain alone). A monocular VO's scale at a keyframe rests on the
+  /// depths of the points it is tracking there; those points are replaced every few tens of
+  /// metres, and with them most of their depth error: a scale error that comes and goes, on top
+  /// of the part that propagates (a random walk: e1's log-scale information λ1). A random walk
+  /// cannot do both at once: one stiff enough for the slow drift (λ1: 0.32 % per edge, ~3 % over
+  /// 100 keyframes) forbids the 5-10 % local scale changes a VO makes within a few hundred
+  /// metres, and one loose enough for those (kDriftModel) lets the scale wander without bound
+  /// between sparse anchors. A real monocular VO on KITTI shows both: the scale of consecutive
+  /// 50 m windows differs by SD 0.07 while the whole sequence's window scales spread by only
+  /// SD 0.08 (a random walk with 0.07 per window would spread by 0.07·√(windows): 0.5 over
+  /// 50 windows). Modelled as a per-keyframe log-scale offset u_k, a Gauss–Markov process
+  /// along the path with SD local_scale_sd and correlation length local_scale_length_m, which
+  /// e1's log-scale residual subtracts (solver::RelativeSim3LocalScaleResidual,
+  /// LocalScaleLinkResidual; docs/correction_model.md). Unit-free (a log-scale over metres at
+  /// INIT's scale), so the corrected path stays independent of the map's unit.
+  /// How large that part is differs by an order of magnitude between VOs (geodrift's own VO on
+  /// rendered KITTI stretches: SD 0.003-0.025 over 50 m windows, consecutive windows 0.005-
+  /// 0.007), so it is not fixed here: 0 (off) by default, and correction/local_scale.hpp
+  /// chooses it per run by cross-validation over the anchors (`geodrift correct`'s default).
+  double local_scale_sd = 0.0;
+  /// Correlation length of the local scale offsets [m]: the distance over which a VO's tracked
+  /// points are replaced (points 5-30 m ahead of a car-mounted camera leave the view within
+  /// ~25 m of travel).
+  double local_scale_length_m = 25.0;
   double lambda1 = 1e5;  ///< kPaper*: weight of e1 (keyframe–keyframe Sim3 edges)
   double lambda2 = 1e5;  ///< kPaper*: weight of e2 (keyframe–geo-view Sim3 edges)
   /// kPaper*: weight of e3 (geo view centre − geo-tag, metres); kPaperMetric: of localized
@@ -320,6 +345,10 @@ struct CorrectorOptions {
                   " must be >= 2");
     if (min_window_keyframes < 0)
       return fail("min_window_keyframes " + std::to_string(min_window_keyframes) + " must be >= 0");
+    if (!(std::isfinite(local_scale_sd) && local_scale_sd >= 0))
+      return fail("local_scale_sd must be finite and >= 0");
+    if (!(std::isfinite(local_scale_length_m) && local_scale_length_m > 0))
+      return fail("local_scale_length_m must be finite and > 0");
     for (double l : {lambda1, lambda2, lambda3})
       if (!(std::isfinite(l) && l > 0)) return fail("PGO weights lambda1..3 must be finite, > 0");
     if (min_shared_points < 1) return fail("min_shared_points must be >= 1");
@@ -491,6 +520,7 @@ class Corrector {
     lie::Sim3d S;
     if (initialized_) S = chain_from_previous(static_cast<int>(kfs_.size()) - 1);
     S_.push_back(S);
+    U_.push_back(U_.empty() ? 0.0 : U_.back());
   }
 
   /// Adds a map point (raw position in M; its reference keyframe must exist).
@@ -1157,6 +1187,15 @@ class Corrector {
     };
     const Eigen::Matrix<double, 7, 7> info1 = paper_information(options_.lambda1);
     const Eigen::Matrix<double, 7, 7> info2 = paper_information(options_.lambda2);
+    // Local scale offsets u_k (CorrectorOptions::local_scale_sd): the window's free, the
+    // keyframes before it held fixed like their poses.
+    const bool local = metric && options_.local_scale_sd > 0;
+    std::vector<double> U(U_.begin() + lo, U_.begin() + hi + 1);
+    std::map<int, double> fixed_u;
+    auto unode = [&](int i) -> double* {
+      if (i >= lo && i <= hi) return &U[i - lo];
+      return &fixed_u.try_emplace(i, U_[i]).first->second;
+    };
     auto add_e1 = [&](int i, int j) {
       lie::Sim3d* Si = node(i);
       lie::Sim3d* Sj = node(j);
@@ -1168,8 +1207,19 @@ class Corrector {
         Eigen::Matrix<double, 7, 7> info = info1;
         const double t = edge_sd(dS, map_per_metre())[4];
         info.diagonal().tail<3>().setConstant(1.0 / (t * t));
-        problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial, info, Si,
-                                   Sj);
+        if (local) {
+          // e1 = 0 at the start with the offsets as they are: the measurement absorbs them.
+          const double du = U_[i] - U_[j];
+          const lie::Sim3d dS_local =
+              lie::Sim3d::exp((Eigen::Matrix<double, 7, 1>() << 0, 0, 0, du, 0, 0, 0).finished()) *
+              dS;
+          problem.add_residual_block(solver::RelativeSim3LocalScaleResidual{dS_local}, trivial,
+                                     info, Si, Sj, solver::euclidean<1>(unode(i)),
+                                     solver::euclidean<1>(unode(j)));
+        } else {
+          problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial, info,
+                                     Si, Sj);
+        }
       } else if (paper)
         problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{dS}, trivial,
                                    options_.lambda1, Si, Sj);
@@ -1230,6 +1280,24 @@ class Corrector {
       }
       edges += 2;
     }
+    if (local) {
+      // The offsets' Gauss–Markov prior along consecutive keyframes, ρ = exp(−d/L) over the
+      // step's length in W (metres); the path's first keyframe has the stationary prior.
+      const double sd = options_.local_scale_sd, L = options_.local_scale_length_m;
+      if (lo == 0)
+        problem.add_residual_block(solver::LocalScalePriorResidual{}, trivial, 1.0 / (sd * sd),
+                                   solver::euclidean<1>(unode(0)));
+      for (int k = std::max(lo, 1); k <= hi; ++k) {
+        const double d =
+            (S_at(k).inverse().translation() - S_at(k - 1).inverse().translation()).norm();
+        const double rho = std::exp(-d / L);
+        const double var = sd * sd * std::max(1.0 - rho * rho, 1e-12);
+        problem.add_residual_block(solver::LocalScaleLinkResidual{rho}, trivial, 1.0 / var,
+                                   solver::euclidean<1>(unode(k - 1)),
+                                   solver::euclidean<1>(unode(k)));
+      }
+      for (auto& [i, u] : fixed_u) problem.set_constant(&u);
+    }
     for (auto& [i, Sf] : fixed) problem.set_constant(&Sf);
 
     rep.time_setup = seconds_since(t0);
@@ -1265,6 +1333,12 @@ class Corrector {
           std::max(rescale, std::exp(std::abs(std::log(S[i - lo].scale() / S_at(i).scale()))));
     if (usable(sum) && rescale <= options_.max_window_rescale) {
       apply_window_update(lo, hi, S);
+      if (local) {
+        // Keyframes after the window follow its last keyframe, its offset included.
+        const double du = U[hi - lo] - U_[hi];
+        for (int i = lo; i <= hi; ++i) U_[i] = U[i - lo];
+        for (int i = hi + 1; i < static_cast<int>(U_.size()); ++i) U_[i] += du;
+      }
     } else if (usable(sum)) {
       rep.termination +=
           " (update rejected: a keyframe rescaled by " + std::to_string(rescale) + "x)";
@@ -1495,6 +1569,9 @@ class Corrector {
   std::vector<map::Keyframe> kfs_;
   std::unordered_map<int, int> kf_index_;
   std::vector<lie::Sim3d> S_;  ///< corrected keyframe poses (valid after INIT)
+  /// Local log-scale offsets u_k of the keyframes (CorrectorOptions::local_scale_sd; 0 when
+  /// unused). A keyframe after the last window carries the last window keyframe's.
+  std::vector<double> U_;
   std::vector<map::MapPoint> pts_;
   std::unordered_map<int, int> pt_index_;
   std::vector<Eigen::Vector3d> X_w_;  ///< corrected points (after INIT)
