@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <geodrift/correction/corrector.hpp>
+#include <geodrift/correction/local_scale.hpp>
 #include <geodrift/correction/replay.hpp>
 #include <geodrift/correction/screening.hpp>
 #include <geodrift/correction/uncertainty.hpp>
@@ -69,6 +70,15 @@ options
                       relative-pose uncertainty over its distance and turn, anchors their
                       sigma_m (docs/correction_model.md): unit-free too; experimental (better
                       at anchors every 100-200 frames, worse at 300-500: docs/RESULTS.md)
+  --local-scale auto|SD
+                      metric weights: SD of the VO's local, mean-reverting log-scale error
+                      (a scale error that comes and goes over ~25 m, on top of the slow
+                      drift). auto (default): chosen from 0, 0.01, 0.02, 0.04, 0.08 by
+                      two-fold cross-validation over the anchors after INIT's (each half
+                      predicted by a run on the other; with fewer than 14 anchors, or
+                      more than 2,000 anchors or 20,000 keyframes, 0 is kept); report.json
+                      lists each candidate's held-out error.
+                      0: the paper's chain alone
   --no-screen-anchors use every anchor as given. By default each anchor is first tested
                       against all the others along the raw path (leave-one-out, under the VO
                       drift model, its level estimated from the anchors): one that disagrees
@@ -185,13 +195,29 @@ double number_option(const Args& args, const std::string& key, double def) {
   return x;
 }
 
+/// report.json's fields of a cross-validated local scale choice, after "chosen_by".
+std::string local_scale_json(const correction::LocalScaleChoice& c) {
+  std::string s;
+  if (!c.rms_m.empty()) {
+    s += ", \"candidates\": [";
+    for (std::size_t i = 0; i < c.candidates.size(); ++i)
+      s += (i ? ", " : "") + json_num(c.candidates[i]);
+    s += "], \"held_out_rms_m\": [";
+    for (std::size_t i = 0; i < c.rms_m.size(); ++i)
+      s += (i ? ", " : "") + (std::isfinite(c.rms_m[i]) ? json_num(c.rms_m[i]) : "null");
+    s += "], \"held_out_anchors\": " + std::to_string(c.held_out);
+  }
+  if (!c.message.empty()) s += ", \"note\": " + io::detail::json_string(c.message);
+  return s;
+}
+
 }  // namespace
 
 int run_correct(int argc, char** argv) {
   const Args args(argc, argv,
                   {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
-                   "keyframe-step", "links", "weights", "first-window", "min-window-keyframes",
-                   "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
+                   "keyframe-step", "links", "weights", "local-scale", "first-window",
+                   "min-window-keyframes", "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
                   {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
@@ -222,6 +248,16 @@ int run_correct(int argc, char** argv) {
   if (links < 1 || links > 100) throw UsageError("--links must be in [1, 100]");
   if (!with_map && opt.mode == correction::Mode::kInitBa)
     throw UsageError("--mode init+ba needs --map (bundle adjustment needs map points)");
+  bool local_auto = true;
+  if (args.has("local-scale") && args.get("local-scale") != "auto") {
+    const std::vector<double> v = parse_number_list("local-scale", args.get("local-scale"));
+    if (v.size() != 1 || !(v[0] >= 0)) throw UsageError("--local-scale takes auto or one SD >= 0");
+    opt.local_scale_sd = v[0];
+    local_auto = false;
+    if (opt.local_scale_sd > 0 &&
+        opt.edge_weights != correction::CorrectorOptions::EdgeWeights::kPaperMetric)
+      throw UsageError("--local-scale applies to --weights metric only");
+  }
   opt.gate_anchors = args.flag("gate-anchors");
   opt.link_consecutive = true;
   opt.consecutive_links = static_cast<int>(links);
@@ -370,7 +406,6 @@ int run_correct(int argc, char** argv) {
   AtomicOutputDir out(out_dir, args.flag("force"));
 
   // ---- wrong anchors: each tested against all the others (correction/screening.hpp) --------
-  correction::Corrector corrector(opt);
   correction::AnchorScreening screening;
   const bool screen = !args.flag("no-screen-anchors");
   if (screen) {
@@ -386,9 +421,23 @@ int run_correct(int argc, char** argv) {
                   " disagree with the others beyond what the path can have drifted (anchors of "
                   "another place or time, a wrong --origin, or a broken trajectory): no "
                   "trustworthy result, nothing written (--no-screen-anchors uses them all)");
-    else
-      correction::apply_screening(screening, corr, &corrector);
   }
+  const bool screened = screen && screening.ok;
+
+  // ---- the VO's local scale error: given, or chosen by cross-validation (local_scale.hpp) ---
+  correction::LocalScaleChoice local_choice;
+  if (local_auto) {
+    std::vector<map::Correspondence> in_use;
+    for (std::size_t j = 0; j < corr.size(); ++j)
+      if (!screened || screening.anchors[j].used) in_use.push_back(corr[j]);
+    if (stderr_is_tty())
+      std::fprintf(stderr,
+                   "geodrift correct: choosing the local scale SD (10 cross-validation runs)\r");
+    local_choice = correction::choose_local_scale(m, in_use, opt);
+    opt.local_scale_sd = local_choice.sd;
+  }
+  correction::Corrector corrector(opt);
+  if (screened) correction::apply_screening(screening, corr, &corrector);
 
   // ---- correction --------------------------------------------------------------------------
   const bool tty = stderr_is_tty();
@@ -567,6 +616,12 @@ int run_correct(int argc, char** argv) {
       << ", \"keyframe_step\": " << (with_map ? 0 : step) << ", \"consecutive_links\": " << links
       << ", \"window_correspondences\": " << opt.window_correspondences << ", \"edge_weights\": \""
       << correction::to_string(opt.edge_weights) << "\""
+      << ", \"local_scale\": {\"sd\": " << json_num(opt.local_scale_sd)
+      << ", \"length_m\": " << json_num(opt.local_scale_length_m) << ", \"chosen_by\": \""
+      << (!local_auto                    ? "--local-scale"
+          : local_choice.cross_validated ? "cross-validation"
+                                         : "default")
+      << "\"" << local_scale_json(local_choice) << "}"
       << (paper_w
               ? ", \"lambda1\": " + json_num(opt.lambda1) + ", \"lambda2\": " +
                     json_num(opt.lambda2) + ", \"lambda3\": " + json_num(opt.lambda3)

@@ -20,6 +20,7 @@
 
 #include "cli_util.hpp"
 #include "commands.hpp"
+#include "geodrift/correction/local_scale.hpp"
 #include "geodrift/correction/replay.hpp"
 #include "geodrift/correction/screening.hpp"
 #include "geodrift/correction/uncertainty.hpp"
@@ -66,6 +67,10 @@ constexpr const char* kHelp =
     "                     1e5, lambda3 = 1, a step's translation to 1 % of its length) |\n"
     "                     paper (in map units) | drift (the VO drift model); metric and drift\n"
     "                     do not depend on the map's unit\n"
+    "  --local-scale auto|SD\n"
+    "                     metric weights: SD of the VO's local, mean-reverting log-scale error;\n"
+    "                     auto (default) chooses it per run by cross-validation over the\n"
+    "                     anchors (correction/local_scale.hpp); 0 = the paper's chain alone\n"
     "  --out DIR          output folder (required); --force to write into a non-empty one\n";
 
 struct Method {
@@ -102,6 +107,9 @@ struct Cell {
   // Uncertainty (correction/uncertainty.hpp), per seed: the fraction of keyframes whose true
   // position lies in their 95 % ellipse, and the estimated drift factor k.
   std::vector<double> coverage, drift_factor;
+  // The local scale SD each seed's main run used (chosen by cross-validation with --local-scale
+  // auto).
+  std::vector<double> local_sd;
   int uncertainty_failed = 0;
 };
 
@@ -114,6 +122,8 @@ struct Setup {
   bool screen = false;                                          // --screen-anchors
   std::vector<char> methods;  // --methods: which of kMethods run (all when empty)
   double wrong_fraction = 0, wrong_min_m = 0, wrong_max_m = 0;  // --wrong-anchors
+  double local_scale_sd = 0;                                    // --local-scale SD
+  bool local_scale_auto = true;                                 // --local-scale auto (the default)
 };
 
 /// Shifts a fraction of the correspondences after INIT's (the first four) horizontally by
@@ -214,6 +224,24 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       if (setup.wrong_fraction > 0)
         screen_clean = correction::screen_anchors(input.keyframes, corr);
     }
+    // --local-scale auto: one choice per anchor set (the same for every method using it).
+    std::map<const void*, double> local_sd;
+    auto local_scale_for = [&](const std::vector<map::Correspondence>& cs,
+                               const correction::AnchorScreening* screening,
+                               const correction::CorrectorOptions& opt) {
+      if (!setup.local_scale_auto) return setup.local_scale_sd;
+      const auto it = local_sd.find(&cs);
+      if (it != local_sd.end()) return it->second;
+      std::vector<map::Correspondence> in_use;
+      for (std::size_t j = 0; j < cs.size(); ++j)
+        if (!(setup.screen && screening && screening->ok && !screening->anchors[j].used))
+          in_use.push_back(cs[j]);
+      correction::CorrectorOptions o = opt;
+      o.mode = correction::Mode::kInitPgo;
+      const double sd = correction::choose_local_scale(input, in_use, o).sd;
+      local_sd[&cs] = sd;
+      return sd;
+    };
     for (int m = 0; m < kNumMethods; ++m) {
       if (setup.trajectory_only && kMethods[m].mode == correction::Mode::kInitBa) continue;
       if (!setup.methods.empty() && !setup.methods[m]) continue;
@@ -224,7 +252,13 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       Cell& cell = local[{m, static_cast<int>(ii)}];
       auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run,
                      const correction::AnchorScreening* screening) {
-        correction::Corrector c(opt);
+        correction::CorrectorOptions o = opt;
+        const bool graph = opt.mode == correction::Mode::kOurs ||
+                           opt.mode == correction::Mode::kInitPgo ||
+                           opt.mode == correction::Mode::kFullBatch;
+        o.local_scale_sd = graph ? local_scale_for(cs, screening, opt) : 0.0;
+        if (main_run && graph) cell.local_sd.push_back(o.local_scale_sd);
+        correction::Corrector c(o);
         if (setup.screen && screening && screening->ok)
           correction::apply_screening(*screening, cs, &c);
         correction::replay(input, cs, &c);
@@ -283,6 +317,7 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
     c.oracle.insert(c.oracle.end(), v.oracle.begin(), v.oracle.end());
     c.coverage.insert(c.coverage.end(), v.coverage.begin(), v.coverage.end());
     c.drift_factor.insert(c.drift_factor.end(), v.drift_factor.begin(), v.drift_factor.end());
+    c.local_sd.insert(c.local_sd.end(), v.local_sd.begin(), v.local_sd.end());
     c.uncertainty_failed += v.uncertainty_failed;
     c.seconds += v.seconds;
     c.wrong += v.wrong;
@@ -317,7 +352,7 @@ std::vector<Eigen::Vector2d> xy(const std::vector<Eigen::Vector3d>& p) {
 int run_experiment(int argc, char** argv) {
   const Args args(argc, argv,
                   {"sequences", "intervals", "seeds", "data-dir", "threads", "weights",
-                   "wrong-anchors", "methods", "out"},
+                   "local-scale", "wrong-anchors", "methods", "out"},
                   {"help", "force", "trajectory-only", "gate-anchors", "screen-anchors"});
   if (args.flag("help")) {
     std::fputs(kHelp, stdout);
@@ -351,6 +386,14 @@ int run_experiment(int argc, char** argv) {
   } catch (const InvalidArgument& e) {
     throw UsageError(std::string("--weights: ") + e.what());
   }
+  if (args.has("local-scale") && args.get("local-scale") != "auto") {
+    const std::vector<double> v = parse_number_list("local-scale", args.get("local-scale"));
+    if (v.size() != 1) throw UsageError("--local-scale takes auto or one number");
+    setup.local_scale_sd = v[0];
+    setup.local_scale_auto = false;
+  }
+  if (!(std::isfinite(setup.local_scale_sd) && setup.local_scale_sd >= 0))
+    throw UsageError("--local-scale must be a finite SD >= 0");
   setup.trajectory_only = args.flag("trajectory-only");
   setup.gate = args.flag("gate-anchors");
   setup.screen = args.flag("screen-anchors");
@@ -443,6 +486,11 @@ int run_experiment(int argc, char** argv) {
          : setup.weights == correction::CorrectorOptions::EdgeWeights::kPaper
              ? "paper (λ1 = λ2 = 1e5, λ3 = 1, in map units)"
              : "drift model")
+     << (setup.weights != correction::CorrectorOptions::EdgeWeights::kPaperMetric ? std::string()
+         : setup.local_scale_auto
+             ? std::string("; local scale offsets with their SD chosen per run by "
+                           "cross-validation over the anchors")
+             : "; local scale SD " + std::to_string(setup.local_scale_sd))
      << " (docs/correction_model.md); anchor gate " << (setup.gate ? "on" : "off")
      << "; anchor screening " << (setup.screen ? "on" : "off") << ".\n\n";
   for (const std::string& name : seqs) {
@@ -535,6 +583,23 @@ int run_experiment(int argc, char** argv) {
       }
     }
     md << " (by interval)\n\n";
+    // The local scale SD the pose-graph methods used (one per seed; the same for each of them).
+    for (int m = 0; m < kNumMethods; ++m) {
+      if (!r.cells.count({m, 0}) || r.cells.at({m, 0}).local_sd.empty()) continue;
+      md << "Local scale SD used by the pose graph (CorrectorOptions::local_scale_sd"
+         << (setup.local_scale_auto ? ", chosen per run by cross-validation" : "")
+         << "), seeds in order, by interval:";
+      for (std::size_t i = 0; i < intervals.size(); ++i) {
+        md << (i ? ";" : "") << " " << intervals[i] << ":";
+        for (double v : r.cells.at({m, static_cast<int>(i)}).local_sd) {
+          char b[32];
+          std::snprintf(b, sizeof b, " %.2g", v);
+          md << b;
+        }
+      }
+      md << "\n\n";
+      break;
+    }
     md << "Simulated drift (50-frame windows, normalised scale; a real monocular VO on KITTI: "
           "range about 0.87–1.24, sd ≈ 0.08, steps sd ≈ 0.07):\n\n"
        << "| seed | global Sim3 error [m] | scale min | scale max | sd | step sd |\n"
@@ -572,6 +637,10 @@ int run_experiment(int argc, char** argv) {
       for (const auto& sample : eval::scale_factor_along_path(r.plot_centres[m], r.plot_gt))
         pts.push_back({static_cast<double>(sample.index), sample.factor});
       if (m == 0 || m == 3) scale.push_back(io::SvgSeries{kMethods[m].name, colors[m], 1.2, pts});
+      // --methods without INIT and Ours: plot the first method that ran (an empty plot was an
+      // error).
+      if (scale.empty() && m != 0 && m != 3)
+        scale.push_back(io::SvgSeries{kMethods[m].name, colors[m], 1.2, pts});
     }
     std::vector<io::SvgMarker> marks;
     for (const auto& a : r.plot_anchors) marks.push_back(io::SvgMarker{"anchor", a.head<2>()});

@@ -336,6 +336,23 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(drift < init);
   }
 
+  // --local-scale: cross-validated by default, a given SD reaches the Corrector, a bad one is
+  // a usage error; report.json says which and how it was chosen.
+  {
+    const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));
+    CHECK(rep.find("\"local_scale\": {\"sd\": ") != std::string::npos);
+    CHECK((rep.find("\"chosen_by\": \"cross-validation\"") != std::string::npos ||
+           rep.find("\"chosen_by\": \"default\", \"note\": ") != std::string::npos));
+    correct_eval("local", map + " --local-scale 0.04");
+    const std::string rep_l = geodrift::test::read_text(t.file("local/report.json"));
+    CHECK(rep_l.find("\"local_scale\": {\"sd\": 0.04, \"length_m\": 25, \"chosen_by\": "
+                     "\"--local-scale\"") != std::string::npos);
+    const Run bad = run("correct " + in + " --local-scale -1 --out " + t.file("bad_local"));
+    CHECK(bad.code != 0);
+    CHECK(bad.output.find("--local-scale") != std::string::npos);
+    CHECK_FALSE(fs::exists(t.file("bad_local")));
+  }
+
   // The three options reach the Corrector and report.json records them.
   {
     const std::string rep = geodrift::test::read_text(t.file("ours/report.json"));

@@ -254,6 +254,10 @@ TEST_CASE("simulate, correct and experiment give identical outputs on identical 
   const auto e1 = experiment("1", "exp1"), e2 = experiment("2", "exp2");
   REQUIRE(e1.count("RESULTS.md"));
   CHECK(without_timings(e1) == without_timings(e2));
-  // The correction-time line ends its paragraph even when --methods leaves out the last method.
-  CHECK(e1.at("RESULTS.md").find(" (by interval)\n\nSimulated drift") != std::string::npos);
+  // The correction-time line ends its paragraph even when --methods leaves out the last method;
+  // the local scale line (Ours has a pose graph) follows it as its own paragraph.
+  const std::string& md = e1.at("RESULTS.md");
+  CHECK(md.find(" (by interval)\n\nLocal scale SD used by the pose graph") != std::string::npos);
+  CHECK(md.find("by interval: 300: ") != std::string::npos);
+  CHECK(md.find("\n\nSimulated drift") != std::string::npos);
 }
