@@ -253,9 +253,7 @@ void run_seed(const sim::KittiSequence& seq, const std::string& name, unsigned s
       auto run = [&](const std::vector<map::Correspondence>& cs, bool main_run,
                      const correction::AnchorScreening* screening) {
         correction::CorrectorOptions o = opt;
-        const bool graph = opt.mode == correction::Mode::kOurs ||
-                           opt.mode == correction::Mode::kInitPgo ||
-                           opt.mode == correction::Mode::kFullBatch;
+        const bool graph = correction::uses_pose_graph(opt.mode);
         o.local_scale_sd = graph ? local_scale_for(cs, screening, opt) : 0.0;
         if (main_run && graph) cell.local_sd.push_back(o.local_scale_sd);
         correction::Corrector c(o);

@@ -80,6 +80,12 @@ inline const char* to_string(Mode m) {
   return "?";
 }
 
+/// True for the modes that run a Sim(3) pose graph (ours, init+pgo, batch): those whose result
+/// the relative-pose edges' weights and the local scale offsets shape.
+inline bool uses_pose_graph(Mode m) {
+  return m == Mode::kOurs || m == Mode::kInitPgo || m == Mode::kFullBatch;
+}
+
 /// Parses "ours" | "init+pgo" | "init+ba" | "init" | "batch". @throws InvalidArgument.
 inline Mode mode_from_string(const std::string& s) {
   for (Mode m : {Mode::kOurs, Mode::kInitPgo, Mode::kInitBa, Mode::kInitOnly, Mode::kFullBatch,
@@ -1100,7 +1106,10 @@ class Corrector {
   /// Applies new window poses: points follow their reference keyframe's correction, keyframes
   /// after the window (and their points) follow the last window keyframe's. O(window + points
   /// of the window): the keyframes after it share one correction, which stays lazy (tail_D_).
-  void apply_window_update(int lo, int hi, const std::vector<lie::Sim3d>& S_new) {
+  /// With `U_new` (the window's local scale offsets, run_pgo), the keyframes after the window
+  /// also follow the last window keyframe's offset change, lazily as well (tail_u_).
+  void apply_window_update(int lo, int hi, const std::vector<lie::Sim3d>& S_new,
+                           const std::vector<double>* U_new = nullptr) {
     materialize_tail(hi);
     const int n = static_cast<int>(kfs_.size());
     lie::Sim3d last_delta;  // S_new⁻¹ · S_old of the last window keyframe, W → W
@@ -1110,20 +1119,28 @@ class Corrector {
       for (int p : pts_of_ref_[i]) X_w_[p] = delta.act(X_w_[p]);
       if (i == hi) last_delta = delta;
     }
+    double last_du = 0.0;
+    if (U_new) {
+      last_du = (*U_new)[hi - lo] - U_[hi];
+      for (int i = lo; i <= hi; ++i) U_[i] = (*U_new)[i - lo];
+    }
     if (hi + 1 >= n) return;
     // Keyframes after the window keep their relative pose to the last window keyframe: those
     // stored as they are (up to the lazy tail) now, the tail by composing its correction.
     if (tail_from_ == kNoTail) {
       tail_from_ = hi + 1;
       tail_D_ = lie::Sim3d();
+      tail_u_ = 0.0;
     }
     const lie::Sim3d last_inverse = last_delta.inverse();
     for (int i = hi + 1; i < tail_from_; ++i) {  // after a window that ended later than this one
       S_[i] = S_[i] * last_inverse;
       for (int p : pts_of_ref_[i]) X_w_[p] = last_delta.act(X_w_[p]);
+      U_[i] += last_du;
     }
     tail_D_ = last_delta * tail_D_;
     tail_D_inverse_ = tail_D_.inverse();
+    tail_u_ += last_du;
   }
 
   /// Keyframe i's corrected pose: S_[i] as stored, or through the lazy tail's correction.
@@ -1142,6 +1159,7 @@ class Corrector {
     for (int i = tail_from_; i <= end; ++i) {
       S_[i] = S_[i] * tail_D_inverse_;
       for (int p : pts_of_ref_[i]) X_w_[p] = tail_D_.act(X_w_[p]);
+      U_[i] += tail_u_;
     }
     tail_from_ = end + 1;
     if (tail_from_ >= static_cast<int>(kfs_.size())) clear_tail();
@@ -1150,6 +1168,7 @@ class Corrector {
     tail_from_ = kNoTail;
     tail_D_ = lie::Sim3d();
     tail_D_inverse_ = lie::Sim3d();
+    tail_u_ = 0.0;
   }
 
   // ---- PGO (paper Sec. 3.5) ----------------------------------------------------------------
@@ -1332,13 +1351,8 @@ class Corrector {
       rescale =
           std::max(rescale, std::exp(std::abs(std::log(S[i - lo].scale() / S_at(i).scale()))));
     if (usable(sum) && rescale <= options_.max_window_rescale) {
-      apply_window_update(lo, hi, S);
-      if (local) {
-        // Keyframes after the window follow its last keyframe, its offset included.
-        const double du = U[hi - lo] - U_[hi];
-        for (int i = lo; i <= hi; ++i) U_[i] = U[i - lo];
-        for (int i = hi + 1; i < static_cast<int>(U_.size()); ++i) U_[i] += du;
-      }
+      // Keyframes after the window follow its last keyframe, its local scale offset included.
+      apply_window_update(lo, hi, S, local ? &U : nullptr);
     } else if (usable(sum)) {
       rep.termination +=
           " (update rejected: a keyframe rescaled by " + std::to_string(rescale) + "x)";
@@ -1576,10 +1590,12 @@ class Corrector {
   std::unordered_map<int, int> pt_index_;
   std::vector<Eigen::Vector3d> X_w_;  ///< corrected points (after INIT)
   /// The lazy tail of the window updates: keyframes from index tail_from_ on store S_[i] with
-  /// S_true = S_[i]·tail_D_⁻¹, and their points X_true = tail_D_·X_w_ (S_at, X_at).
+  /// S_true = S_[i]·tail_D_⁻¹, their points X_true = tail_D_·X_w_ (S_at, X_at), and their
+  /// local scale offsets u_true = U_[i] + tail_u_.
   static constexpr int kNoTail = std::numeric_limits<int>::max();
   int tail_from_ = kNoTail;
   lie::Sim3d tail_D_, tail_D_inverse_;
+  double tail_u_ = 0.0;
   std::vector<std::vector<int>> pts_of_ref_;        ///< kf index -> points it is the reference of
   std::vector<int> ref_of_pt_;                      ///< point -> its reference keyframe's index
   std::vector<std::vector<int>> kf_pts_;            ///< kf index -> points it observes

@@ -68,8 +68,7 @@ inline LocalScaleChoice choose_local_scale(
     out.message = "local scale offsets are used with the metric weights only";
     return out;
   }
-  if (options.mode != Mode::kOurs && options.mode != Mode::kInitPgo &&
-      options.mode != Mode::kFullBatch) {
+  if (!uses_pose_graph(options.mode)) {
     out.message = std::string("mode ") + to_string(options.mode) + " has no pose graph";
     return out;
   }
