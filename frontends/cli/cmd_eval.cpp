@@ -366,7 +366,8 @@ int run_eval(int argc, char** argv) {
         by_time ? num(assoc.max_abs_time_diff_s()).c_str() : "null");
     std::printf(" \"error_2d\": %s,\n", stats_json(e2d.all).c_str());
     std::printf(" \"error_2d_after_last_anchor\": %s,\n",
-                split ? stats_json(e2d.after_last_anchor).c_str() : "null");
+                split && e2d.after_last_anchor.count > 0 ? stats_json(e2d.after_last_anchor).c_str()
+                                                         : "null");
     std::printf(" \"global_sim3_error_2d\": %s,\n",
                 g.alignment.ok() ? stats_json(g.errors.all).c_str() : "null");
     std::printf(" \"ate_rmse\": %s,\n", num(ate).c_str());
@@ -396,12 +397,15 @@ int run_eval(int argc, char** argv) {
               missing);
   std::printf("  2D error [m]               Ave %.3f  SD %.3f  max %.3f\n", e2d.all.mean,
               e2d.all.sd, e2d.all.max);
-  if (split)
+  if (split && e2d.after_last_anchor.count > 0)
     std::printf(
         "  2D error after last anchor Ave %.3f  SD %.3f  max %.3f  (%d keyframes after "
         "frame %d)\n",
         e2d.after_last_anchor.mean, e2d.after_last_anchor.sd, e2d.after_last_anchor.max,
         e2d.after_last_anchor.count, last_anchor_frame);
+  else if (split)
+    std::printf("  2D error after last anchor n/a (no keyframe after frame %d has ground truth)\n",
+                last_anchor_frame);
   if (g.alignment.ok())
     std::printf("  global Sim3 error [m]      Ave %.3f  SD %.3f  max %.3f  (Umeyama scale %.6g)\n",
                 g.errors.all.mean, g.errors.all.sd, g.errors.all.max, g.alignment.s);
@@ -409,12 +413,17 @@ int run_eval(int argc, char** argv) {
     std::printf("  global Sim3 error          n/a (%s)\n", g.alignment.message.c_str());
   std::printf("  ATE RMSE [m]               %.3f (no alignment)\n", ate);
   if (poses) {
-    std::printf("  RPE (%lld matched poses)    trans %.3f m  rot %.4f deg (mean)\n", delta,
+    std::printf("  RPE (pairs %lld apart)      trans %.3f m  rot %.4f deg (mean)\n", delta,
                 rpe.translation.mean, rpe.rotation.mean * 180.0 / M_PI);
     std::printf("  KITTI segment error        %.3f %%  %.5f deg/m  (%d segments)\n",
                 seg.translation_percent, seg.rotation_deg_per_m, seg.segments);
   } else {
-    std::printf("  RPE, KITTI segment error   n/a (the result has no orientations)\n");
+    if (r.T_wc.empty())
+      std::printf("  RPE, KITTI segment error   n/a (the result has no orientations)\n");
+    else
+      std::printf(
+          "  RPE, KITTI segment error   n/a (%zu matched poses; pairs %lld apart need more)\n",
+          est_T.size(), delta);
   }
   return 0;
 }

@@ -323,6 +323,26 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
           std::string::npos);
   }
 
+  // Ground truth that ends before the last anchor: nothing to say after it (n/a and null, not
+  // a mean of zero over no keyframes).
+  {
+    std::istringstream gt(geodrift::test::read_text(t.file("sim/ground_truth_kitti.txt")));
+    std::string line, head;
+    for (int i = 0; i < 700 && std::getline(gt, line); ++i) head += line + "\n";
+    geodrift::test::write_text(t.file("gt_700.txt"), head);
+    const std::string args = "eval --result " + t.file("ours") + " --ground-truth " +
+                             t.file("gt_700.txt") + " --kitti-to-w";
+    const Run e = run(args);
+    INFO(e.output);
+    REQUIRE(e.code == 0);
+    CHECK(e.output.find("2D error after last anchor n/a (no keyframe after frame") !=
+          std::string::npos);
+    const Run j = run(args + " --json");
+    INFO(j.output);
+    REQUIRE(j.code == 0);
+    CHECK(j.output.find("\"error_2d_after_last_anchor\": null") != std::string::npos);
+  }
+
   // --weights drift reaches the Corrector (it once had no effect: only the paper's weights were
   // ever set), and report.json says which weights were used.
   {

@@ -253,6 +253,17 @@ TEST_CASE("Anchors CSV round trips and every position form lands on the same W p
   CHECK(xa[0].line == 3);
   CHECK_THROWS_AS(io::local_frame_at_first_anchor(io::read_anchors_csv(xyz_path)),
                   geodrift::InvalidArgument);
+
+  // A spreadsheet export: UTF-8 byte-order mark and CRLF line ends read as the same anchors.
+  const std::string bom_path = dir.file("bom.csv");
+  write_text(bom_path,
+             "\xEF\xBB\xBF"
+             "frame,x,y,z,sigma_m\r\n10,1.5,-2.5,3,0.2\r\n");
+  const std::vector<io::Anchor> ba = io::read_anchors(bom_path, frame);
+  REQUIRE(ba.size() == 1);
+  CHECK(ba[0].y_w == Eigen::Vector3d(1.5, -2.5, 3.0));
+  CHECK(ba[0].frame == 10);
+  CHECK(ba[0].sigma_m == 0.2);
 }
 
 TEST_CASE("COLMAP text models round trip through map::Map", "[io][colmap]") {

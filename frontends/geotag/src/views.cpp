@@ -137,6 +137,8 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
   std::vector<std::string> header;
   while (std::getline(in, line)) {
     ++lineno;
+    // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column's name.
+    if (lineno == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     header = split_csv(t);

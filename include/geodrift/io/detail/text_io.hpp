@@ -162,6 +162,8 @@ class LineReader {
                       " MiB limit (a binary or corrupt file?)");
     }
     if (!line->empty() && line->back() == '\r') line->pop_back();
+    // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first field.
+    if (line_ == 1 && line->compare(0, 3, "\xEF\xBB\xBF") == 0) line->erase(0, 3);
     return true;
   }
   int line() const { return line_; }
