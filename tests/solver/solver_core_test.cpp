@@ -472,30 +472,34 @@ TEST_CASE("CHOLMOD and dense solvers agree; not positive definite is a status", 
   Eigen::VectorXd b(s.num_cols()), x1(s.num_cols()), x2(s.num_cols());
   for (int i = 0; i < b.size(); ++i) b[i] = n(rng);
   // Both orderings: block AMD (CholmodSolver gathers P·H·Pᵀ itself) and CHOLMOD's scalar AMD.
+  // Both factor kinds: supernodal and simplicial (Factorization::kAuto picks one of them).
+  using Factorization = solver::CholmodSolver::Factorization;
   for (const auto ordering :
-       {solver::CholmodSolver::Ordering::kBlockAmd, solver::CholmodSolver::Ordering::kAmd}) {
-    INFO("ordering " << static_cast<int>(ordering));
-    solver::BlockSparseMatrix Hk = H;
-    solver::CholmodSolver chol(ordering);
-    solver::DenseSolver dense;
-    REQUIRE(chol.analyze(s) == solver::LinearSolverStatus::kSuccess);
-    REQUIRE(dense.analyze(s) == solver::LinearSolverStatus::kSuccess);
-    REQUIRE(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
-    REQUIRE(dense.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
-    CHECK(chol.is_supernodal());
-    REQUIRE(chol.solve(b.data(), x1.data()) == solver::LinearSolverStatus::kSuccess);
-    REQUIRE(dense.solve(b.data(), x2.data()) == solver::LinearSolverStatus::kSuccess);
-    CHECK(test::near(x1, x2, 1e-10));
-    CHECK(test::near(Hk.to_dense() * x1, b, 1e-10));
-    // Break positive definiteness: both report it, no exception; the message names H's column.
-    Hk.values()[s.diagonal_positions()[4]] = -100.0;
-    CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
-    CHECK_THAT(chol.message(), Catch::Contains("not positive definite (column 4)"));
-    CHECK(dense.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
-    // And recover on the next values.
-    Hk.values()[s.diagonal_positions()[4]] = 1e3;
-    CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
-  }
+       {solver::CholmodSolver::Ordering::kBlockAmd, solver::CholmodSolver::Ordering::kAmd})
+    for (const auto kind : {Factorization::kSupernodal, Factorization::kSimplicial}) {
+      INFO("ordering " << static_cast<int>(ordering) << ", factorization "
+                       << static_cast<int>(kind));
+      solver::BlockSparseMatrix Hk = H;
+      solver::CholmodSolver chol(ordering, kind);
+      solver::DenseSolver dense;
+      REQUIRE(chol.analyze(s) == solver::LinearSolverStatus::kSuccess);
+      REQUIRE(dense.analyze(s) == solver::LinearSolverStatus::kSuccess);
+      REQUIRE(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+      REQUIRE(dense.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+      CHECK(chol.is_supernodal() == (kind == Factorization::kSupernodal));
+      REQUIRE(chol.solve(b.data(), x1.data()) == solver::LinearSolverStatus::kSuccess);
+      REQUIRE(dense.solve(b.data(), x2.data()) == solver::LinearSolverStatus::kSuccess);
+      CHECK(test::near(x1, x2, 1e-10));
+      CHECK(test::near(Hk.to_dense() * x1, b, 1e-10));
+      // Break positive definiteness: both report it, no exception; the message names H's column.
+      Hk.values()[s.diagonal_positions()[4]] = -100.0;
+      CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
+      CHECK_THAT(chol.message(), Catch::Contains("not positive definite (column 4)"));
+      CHECK(dense.factorize(Hk) == solver::LinearSolverStatus::kNotPositiveDefinite);
+      // And recover on the next values.
+      Hk.values()[s.diagonal_positions()[4]] = 1e3;
+      CHECK(chol.factorize(Hk) == solver::LinearSolverStatus::kSuccess);
+    }
 }
 
 TEST_CASE("Options::check_jacobians catches a wrong analytic Jacobian", "[solver][jacobian]") {

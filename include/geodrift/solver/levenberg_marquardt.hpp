@@ -50,7 +50,7 @@ namespace geodrift::solver {
 
 /// Which linear solver LM uses for the damped normal equations.
 enum class LinearSolverType {
-  kCholmod,  ///< CHOLMOD supernodal Cholesky on the full H (general)
+  kCholmod,  ///< CHOLMOD Cholesky on the full H (general; supernodal or simplicial by its rule)
   /// Eliminate R^3 point blocks (BA); the reduced camera system goes to the block Cholesky
   /// when its cameras are 6/7 wide and its factor is thin (≤ kAutoMaxBlocksPerColumn blocks per
   /// column), otherwise to CHOLMOD (SchurSolver::ReducedSolver::kAuto, schur.hpp).
