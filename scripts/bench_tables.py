@@ -216,6 +216,7 @@ def t_correction(results):
     # numeric arguments.
     order = [("init+pgo", "init+pgo"), ("ours", "ours (defaults: two-pass BA)"),
              ("ours (one-pass BA)", "peer: ours, one-pass BA (round-3 defaults)"),
+             ("ours (local scale 0.08)", "ours, local scale offsets SD 0.08"),
              ("ours (before)", "peer: ours, round-1 options"), ("batch", "full batch")]
     by_label = {c(b, "label"): b for n, b in bench.items()
                 if n.startswith("BM_Correct_Kitti02_Interval100/")}
