@@ -449,10 +449,33 @@ int run_correct(int argc, char** argv) {
   const double total_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (tty) std::fputc('\n', stderr);
-  if (!corrector.initialized())
-    throw Error("INIT did not succeed with the anchors of " + anchors_path + ": " +
-                (corrector.init_message().empty() ? std::string("too few usable anchors")
-                                                  : corrector.init_message()));
+  if (!corrector.initialized()) {
+    std::string why = corrector.init_message();
+    if (why.empty()) {
+      // Name what the screening took away: the user sees which anchors to check.
+      // With this few anchors the leave-one-out test has little redundancy: the one it singles
+      // out is not always the wrong one (a simulated 02 with 4 anchors, the second 470 m off:
+      // it left out the third), so every line is named.
+      std::string out_lines, all_lines;
+      int kept = 0;
+      for (std::size_t j = 0; j < corr.size(); ++j) {
+        const std::string l = std::to_string(anchors[j].line);
+        all_lines += (all_lines.empty() ? "" : ", ") + l;
+        if (!screened || screening.anchors[j].used)
+          ++kept;
+        else
+          out_lines += (out_lines.empty() ? "" : ", ") + l;
+      }
+      why = "too few usable anchors";
+      if (!out_lines.empty())
+        why += " (" + std::to_string(kept) + " of " + std::to_string(corr.size()) +
+               " left after the screening left out line(s) " + out_lines +
+               " as inconsistent with the others; with this few anchors it cannot always tell "
+               "which one is wrong: check lines " +
+               all_lines + "; INIT needs 4 consistent anchors)";
+    }
+    throw Error("INIT did not succeed with the anchors of " + anchors_path + ": " + why);
+  }
 
   // ---- what became of each anchor ----------------------------------------------------------
   const auto& decisions = corrector.anchor_decisions();

@@ -121,6 +121,18 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
         correct(t.write("a.csv", "frame,x,y,z\n5,1,2,0\n15,1,2,3\n25,1,2,6\n35,1,2,9\n")),
         {"a.csv", "collinear", "unobservable"});
   }
+  SECTION("4 anchors, one of them 500 m off: the error says so and names the lines") {
+    std::ostringstream text;
+    text << anchors_text({5, 15});  // the header (line 1) and lines 2, 3
+    const double t25 = 0.04 * 25;   // line 4: frame 25, its W position + 500 m east
+    text << "25," << 500 + 2 * 10 * std::sin(t25) << "," << 2 * (10 * (1 - std::cos(t25)) + 12.5)
+         << ",0,0.05\n";
+    const std::string last = anchors_text({35});
+    text << last.substr(last.find('\n') + 1);
+    expect_failure(
+        correct(t.write("a.csv", text.str())),
+        {"a.csv", "INIT did not succeed", "3 of 4 left", "inconsistent", "check lines 2, 3, 4, 5"});
+  }
   SECTION("an anchor outside the trajectory's range") {
     expect_failure(correct(t.write("a.csv", anchors_text({5, 15, 25, 35, 60}))),
                    {"a.csv:6", "outside the trajectory"});
