@@ -127,6 +127,16 @@ inline std::string command_line(int argc, char** argv) {
   return s;
 }
 
+/// A number for report.json: shortest round-trip text, or null when not finite.
+inline std::string json_num(double v) {
+  return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
+}
+
+/// A number for a CSV cell: shortest round-trip text, or an empty cell when not finite.
+inline std::string csv_num(double v) {
+  return std::isfinite(v) ? io::detail::fmt(v) : std::string();
+}
+
 /// Reads a times file (one timestamp per non-comment line, strictly increasing) for `n` poses
 /// of `for_path`.
 inline std::vector<double> read_times_file(const std::string& path, std::size_t n,

@@ -142,10 +142,6 @@ lie::SE3d interpolate(const lie::SE3d& a_cw, const lie::SE3d& b_cw, double fract
   return lie::SE3d(R, c).inverse();
 }
 
-std::string json_num(double v) {
-  return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
-}
-
 /// Checks the anchors' geometry before anything runs: at least INIT's count, and the first ones
 /// (those INIT uses) not coincident horizontally (a vertical line or a point leaves yaw and scale
 /// unobservable).
@@ -203,8 +199,7 @@ std::string local_scale_json(const correction::LocalScaleChoice& c) {
     for (std::size_t i = 0; i < c.candidates.size(); ++i)
       s += (i ? ", " : "") + json_num(c.candidates[i]);
     s += "], \"held_out_rms_m\": [";
-    for (std::size_t i = 0; i < c.rms_m.size(); ++i)
-      s += (i ? ", " : "") + (std::isfinite(c.rms_m[i]) ? json_num(c.rms_m[i]) : "null");
+    for (std::size_t i = 0; i < c.rms_m.size(); ++i) s += (i ? ", " : "") + json_num(c.rms_m[i]);
     s += "], \"held_out_anchors\": " + std::to_string(c.held_out);
   }
   if (!c.message.empty()) s += ", \"note\": " + io::detail::json_string(c.message);

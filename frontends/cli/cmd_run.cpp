@@ -110,12 +110,6 @@ outputs in DIR (map frame M: the VO's own frame and arbitrary scale; geodrift ve
   report.json         version, command line, parameters, counts, lost frames, timings
 )";
 
-std::string json_num(double v) {
-  return std::isfinite(v) ? io::detail::fmt(v) : std::string("null");
-}
-
-std::string csv_num(double v) { return std::isfinite(v) ? io::detail::fmt(v) : std::string(); }
-
 }  // namespace
 
 int run_run(int argc, char** argv) {
@@ -506,8 +500,7 @@ int run_run(int argc, char** argv) {
       as << a.keyframe << "," << (ki >= 0 ? fin.keyframes()[ki].frame_index : -1) << "," << a.view
          << "," << tag.id << "," << io::detail::fmt(a.score) << "," << a.putative << "," << a.kept
          << "," << a.pairs_3d << "," << a.result.inliers << "," << io::detail::fmt(a.result.rms_px)
-         << "," << (std::isfinite(a.tilt_deg) ? io::detail::fmt(a.tilt_deg) : "") << ","
-         << (a.result.ok ? 1 : 0) << ",";
+         << "," << csv_num(a.tilt_deg) << "," << (a.result.ok ? 1 : 0) << ",";
       if (ki >= 0 && g.center_k.allFinite()) {
         const Eigen::Vector3d c = fin.keyframe_sim3(ki).inverse().act(g.center_k);
         as << io::detail::fmt(c.x()) << "," << io::detail::fmt(c.y()) << ","

@@ -14,6 +14,7 @@
 #include "geodrift/error.hpp"
 #include "geodrift/geotag/exif.hpp"
 #include "geodrift/geotag/panorama.hpp"
+#include "geodrift/io/detail/text_io.hpp"
 
 namespace geodrift::geotag {
 
@@ -25,48 +26,11 @@ bool is_two_to_one(int w, int h) { return static_cast<long long>(w) == 2LL * h; 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
-
-std::vector<std::string> split_csv(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string tok;
-  while (std::getline(ss, tok, ',')) out.push_back(trim(tok));
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
-}
-
-[[noreturn]] void fail(const std::string& path, int line, const std::string& what) {
-  std::ostringstream os;
-  os << path << ":" << line << ": " << what;
-  throw InvalidArgument(os.str());
-}
-
-double parse_number(const std::string& text, const std::string& path, int line,
-                    const std::string& field) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || end != text.c_str() + text.size())
-    fail(path, line, field + " '" + text + "' is not a number");
-  if (!std::isfinite(v)) fail(path, line, field + " '" + text + "' is not finite");
-  return v;
-}
-
-/// A whole number in int's range (ids, frame indices): checked before the cast, as converting a
-/// double outside the range is undefined.
-int parse_int(const std::string& text, const std::string& path, int line,
-              const std::string& field) {
-  const double v = parse_number(text, path, line, field);
-  if (v != std::floor(v) || v < std::numeric_limits<int>::min() ||
-      v > std::numeric_limits<int>::max())
-    fail(path, line, field + " '" + text + "' is not an integer in int's range");
-  return static_cast<int>(v);
-}
+using io::detail::parse_double;
+using io::detail::parse_error;
+using io::detail::parse_int;
+using io::detail::split_csv;
+using io::detail::trim;
 
 std::uint32_t be32(const unsigned char* p) {
   return (std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) | (std::uint32_t(p[2]) << 8) |
@@ -129,16 +93,15 @@ bool decoded_size(const std::string& path, int* w, int* h) {
 std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
                                        const GeoSourceOptions& options) {
   namespace fs = std::filesystem;
-  std::ifstream in(csv_path);
-  if (!in) throw Error("cannot open geo-tag CSV '" + csv_path + "' for reading");
+  // LineReader: names the path in open errors, drops a CR and a UTF-8 byte-order mark
+  // (spreadsheet exports), refuses a binary file's endless line.
+  io::detail::LineReader in(csv_path);
   const fs::path folder = fs::absolute(fs::path(csv_path)).parent_path();
   std::string line;
   int lineno = 0;
   std::vector<std::string> header;
-  while (std::getline(in, line)) {
-    ++lineno;
-    // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column's name.
-    if (lineno == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+  while (in.next(&line)) {
+    lineno = in.line();
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     header = split_csv(t);
@@ -153,7 +116,7 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
     if (required) {
       std::string list;
       for (const char* n : names) list += (list.empty() ? "" : " or ") + std::string(n);
-      fail(csv_path, lineno, "header has no column " + list);
+      parse_error(csv_path, lineno, "header has no column " + list);
     }
     return -1;
   };
@@ -168,21 +131,22 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
             c_cy = find({"cy"}, false);
   const int n_intr = (c_fx >= 0) + (c_fy >= 0) + (c_cx >= 0) + (c_cy >= 0);
   if (n_intr != 0 && n_intr != 4)
-    fail(csv_path, lineno, "photo intrinsics need all four columns fx, fy, cx, cy");
+    parse_error(csv_path, lineno, "photo intrinsics need all four columns fx, fy, cx, cy");
 
   std::vector<GeoSource> out;
-  while (std::getline(in, line)) {
-    ++lineno;
+  while (in.next(&line)) {
+    lineno = in.line();
     const std::string t = trim(line);
     if (t.empty() || t[0] == '#') continue;
     const std::vector<std::string> f = split_csv(t);
     if (f.size() < header.size())
-      fail(csv_path, lineno,
-           std::to_string(f.size()) + " fields, header has " + std::to_string(header.size()));
+      parse_error(
+          csv_path, lineno,
+          std::to_string(f.size()) + " fields, header has " + std::to_string(header.size()));
     GeoSource s;
-    s.tag.id =
-        c_id >= 0 ? parse_int(f[c_id], csv_path, lineno, "id") : static_cast<int>(out.size());
-    if (f[c_file].empty()) fail(csv_path, lineno, "empty file name");
+    s.tag.id = c_id >= 0 ? static_cast<int>(parse_int(f[c_id], csv_path, lineno, "id"))
+                         : static_cast<int>(out.size());
+    if (f[c_file].empty()) parse_error(csv_path, lineno, "empty file name");
     fs::path p(f[c_file]);
     if (p.is_relative()) {
       fs::path a = folder / p;
@@ -196,23 +160,23 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
     const auto exif_of = [&]() -> const ExifGeotag& {
       if (!exif) {
         if (!fs::is_regular_file(p))
-          fail(csv_path, lineno, "image '" + s.path + "' does not exist");
+          parse_error(csv_path, lineno, "image '" + s.path + "' does not exist");
         try {
           exif = read_exif(s.path);
         } catch (const Error& e) {
-          fail(csv_path, lineno, e.what());
+          parse_error(csv_path, lineno, e.what());
         }
       }
       return *exif;
     };
     const auto value = [&](int c, double ExifGeotag::*field, const char* name,
                            const char* exif_name) {
-      if (!f[c].empty()) return parse_number(f[c], csv_path, lineno, name);
+      if (!f[c].empty()) return parse_double(f[c], csv_path, lineno, name);
       const double v = exif_of().*field;
       if (!std::isfinite(v))
-        fail(csv_path, lineno,
-             std::string(name) + " is empty and image '" + s.path + "' has no EXIF GPS " +
-                 exif_name);
+        parse_error(csv_path, lineno,
+                    std::string(name) + " is empty and image '" + s.path + "' has no EXIF GPS " +
+                        exif_name);
       return v;
     };
     s.tag.latitude_deg = value(c_lat, &ExifGeotag::latitude_deg, "latitude", "latitude");
@@ -220,53 +184,55 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
     s.tag.height = value(c_h, &ExifGeotag::altitude_m, "height", "altitude");
     const double heading_deg = f[c_head].empty()
                                    ? exif_of().true_heading_deg
-                                   : parse_number(f[c_head], csv_path, lineno, "heading_deg");
+                                   : parse_double(f[c_head], csv_path, lineno, "heading_deg");
     if (std::abs(s.tag.latitude_deg) > 90)
-      fail(csv_path, lineno, "latitude " + f[c_lat] + " outside [-90, 90]");
+      parse_error(csv_path, lineno, "latitude " + f[c_lat] + " outside [-90, 90]");
     if (std::abs(s.tag.longitude_deg) > 180)
-      fail(csv_path, lineno, "longitude " + f[c_lon] + " outside [-180, 180]");
+      parse_error(csv_path, lineno, "longitude " + f[c_lon] + " outside [-180, 180]");
     // NaN (unknown) only for a photo without a heading cell or EXIF true heading; checked below.
     s.tag.heading = std::isfinite(heading_deg)
                         ? std::fmod(std::fmod(heading_deg, 360.0) + 360.0, 360.0) * kDeg
                         : std::numeric_limits<double>::quiet_NaN();
     if (c_frame >= 0 && !f[c_frame].empty())
-      s.frame = parse_int(f[c_frame], csv_path, lineno, "frame");
+      s.frame = static_cast<int>(parse_int(f[c_frame], csv_path, lineno, "frame"));
     int w = 0, h = 0;
-    if (!fs::is_regular_file(p)) fail(csv_path, lineno, "image '" + s.path + "' does not exist");
+    if (!fs::is_regular_file(p))
+      parse_error(csv_path, lineno, "image '" + s.path + "' does not exist");
     if (!image_size(s.path, &w, &h))
-      fail(csv_path, lineno, "image '" + s.path + "' cannot be read");
+      parse_error(csv_path, lineno, "image '" + s.path + "' cannot be read");
     if (c_kind >= 0 && !f[c_kind].empty()) {
       if (f[c_kind] == "panorama")
         s.kind = SourceKind::kPanorama;
       else if (f[c_kind] == "photo")
         s.kind = SourceKind::kPhoto;
       else
-        fail(csv_path, lineno, "kind '" + f[c_kind] + "' is neither panorama nor photo");
+        parse_error(csv_path, lineno, "kind '" + f[c_kind] + "' is neither panorama nor photo");
     } else {
       s.kind = is_two_to_one(w, h) ? SourceKind::kPanorama : SourceKind::kPhoto;
     }
     if (s.kind == SourceKind::kPanorama && !is_two_to_one(w, h))
-      fail(csv_path, lineno,
-           "panorama '" + s.path + "' is " + std::to_string(w) + "x" + std::to_string(h) +
-               ", not 2:1 equirectangular");
+      parse_error(csv_path, lineno,
+                  "panorama '" + s.path + "' is " + std::to_string(w) + "x" + std::to_string(h) +
+                      ", not 2:1 equirectangular");
     if (s.kind == SourceKind::kPanorama && !std::isfinite(s.tag.heading))
-      fail(csv_path, lineno,
-           "panorama '" + s.path +
-               "' needs a heading: heading_deg is empty and the image has no EXIF true "
-               "GPSImgDirection" +
-               (std::isfinite(exif_of().magnetic_heading_deg) ? " (only a magnetic one)" : ""));
+      parse_error(
+          csv_path, lineno,
+          "panorama '" + s.path +
+              "' needs a heading: heading_deg is empty and the image has no EXIF true "
+              "GPSImgDirection" +
+              (std::isfinite(exif_of().magnetic_heading_deg) ? " (only a magnetic one)" : ""));
     if (s.kind == SourceKind::kPhoto && exif_of().orientation > 1 && !decoded_size(s.path, &w, &h))
-      fail(csv_path, lineno, "image '" + s.path + "' cannot be read");
+      parse_error(csv_path, lineno, "image '" + s.path + "' cannot be read");
     if (s.kind == SourceKind::kPhoto) {
       map::Camera& c = s.photo_camera;
       c.id = -1;
       c.width = w;
       c.height = h;
       if (n_intr == 4) {
-        c.fx = parse_number(f[c_fx], csv_path, lineno, "fx");
-        c.fy = parse_number(f[c_fy], csv_path, lineno, "fy");
-        c.cx = parse_number(f[c_cx], csv_path, lineno, "cx");
-        c.cy = parse_number(f[c_cy], csv_path, lineno, "cy");
+        c.fx = parse_double(f[c_fx], csv_path, lineno, "fx");
+        c.fy = parse_double(f[c_fy], csv_path, lineno, "fy");
+        c.cx = parse_double(f[c_cx], csv_path, lineno, "cx");
+        c.cy = parse_double(f[c_cy], csv_path, lineno, "cy");
       } else if (std::isfinite(options.photo_hfov_deg)) {
         if (!(options.photo_hfov_deg > 1 && options.photo_hfov_deg < 179))
           throw InvalidArgument("photo horizontal field of view " +
@@ -279,15 +245,16 @@ std::vector<GeoSource> read_geotag_csv(const std::string& csv_path,
         c.cx = 0.5 * w - 0.5;
         c.cy = 0.5 * h - 0.5;
       } else {
-        fail(csv_path, lineno,
-             "photo '" + s.path +
-                 "' has no intrinsics (give columns fx, fy, cx, cy or a field of view; its EXIF "
-                 "has no FocalLengthIn35mmFilm)");
+        parse_error(
+            csv_path, lineno,
+            "photo '" + s.path +
+                "' has no intrinsics (give columns fx, fy, cx, cy or a field of view; its EXIF "
+                "has no FocalLengthIn35mmFilm)");
       }
       try {
         c.validate();
       } catch (const InvalidArgument& e) {
-        fail(csv_path, lineno, e.what());
+        parse_error(csv_path, lineno, e.what());
       }
     }
     out.push_back(std::move(s));
