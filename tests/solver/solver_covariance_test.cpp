@@ -347,6 +347,8 @@ TEST_CASE("Covariance reports rank deficiency as a status, never NaN", "[solver]
     CHECK(cov.status() == CovarianceStatus::kRankDeficient);
     CHECK(why.find("rank deficient") != std::string::npos);
     CHECK(cov.message() == why);
+    // The factorisation finds it: the state whose pivot failed is one of the chain's.
+    CHECK(std::find(blocks.begin(), blocks.end(), cov.rank_deficient_state()) != blocks.end());
     CHECK_FALSE(cov.has_block(&poses[0]));
     CHECK_THROWS_AS(cov.block(&poses[3]), InvalidArgument);
     // Fixing the gauge makes it well posed.
@@ -354,6 +356,7 @@ TEST_CASE("Covariance reports rank deficiency as a status, never NaN", "[solver]
     blocks.erase(blocks.begin());
     REQUIRE(cov.compute(p, blocks, &why));
     CHECK(cov.block(&poses[29]).allFinite());
+    CHECK(cov.rank_deficient_state() == nullptr);
   }
   SECTION("Sim3 chains anchored by two camera centres: rotation about their line is free") {
     // One null direction: rounding leaves its Cholesky pivot positive about half the time, and

@@ -278,6 +278,16 @@ inline PathUncertainty estimate_path_uncertainty(const Corrector& corrector,
     }
     std::string why;
     if (!cov.compute(problem, wanted, pairs, &why)) {
+      // Name the deficient state in the user's terms, not by its address.
+      const void* bad = cov.rank_deficient_state();
+      for (int i = 0; i < nk && bad; ++i)
+        if (bad == &S[i])
+          why = "the graph is rank deficient at keyframe " + std::to_string(kfs[i].id) +
+                " (frame " + std::to_string(kfs[i].frame_index) + ")";
+      for (int j = 0; j < na && bad; ++j)
+        if (bad == &V[j])
+          why = "the graph is rank deficient at the view node of anchor " + std::to_string(j) +
+                " (on keyframe " + std::to_string(corr[j].keyframe) + ")";
       out.message = "no covariance: " + why;
       return false;
     }

@@ -655,6 +655,10 @@ class Covariance {
   /// rank test, a conditioning indicator: 1/cond(H̃) ≈ this / λ_max(H̃), λ_max(H̃) ∈ [1, max
   /// nonzeros per row]. NaN before a successful factorisation.
   double min_scaled_eigenvalue() const { return min_eigenvalue_; }
+  /// After a kRankDeficient failure found by the factorisation: the state whose pivot failed
+  /// (for the caller to name in its own terms; message() gives its address). nullptr otherwise,
+  /// e.g. when the eigenvalue estimate found the deficiency.
+  const void* rank_deficient_state() const { return deficient_state_; }
 
   /// Whether Σ_xx of state x is available (requested in the last successful compute()).
   bool has_block(const void* x) const { return diagonal_.count(x) > 0; }
@@ -692,6 +696,7 @@ class Covariance {
     times_ = CovarianceTimes();
     min_pivot_ratio_ = std::numeric_limits<double>::infinity();
     min_eigenvalue_ = std::numeric_limits<double>::quiet_NaN();
+    deficient_state_ = nullptr;
     diagonal_.clear();
     pairs_.clear();
   }
@@ -708,7 +713,7 @@ class Covariance {
 
   /// The rank-deficiency message: the failing pivot's parameter block and tangent coordinate
   /// (scalar column `col`, elimination order), or with col < 0 the Rayleigh-quotient estimate.
-  std::string rank_message(const Problem& problem, int col) const {
+  std::string rank_message(const Problem& problem, int col) {
     std::ostringstream os;
     os << "Covariance: the Gauss-Newton matrix is rank deficient (smallest eigenvalue of the "
           "Jacobi-scaled H <= rank_tolerance "
@@ -721,6 +726,7 @@ class Covariance {
       const void* state = nullptr;
       for (const ParameterBlock& pb : problem.parameter_blocks())
         if (pb.index == b) state = pb.state;
+      deficient_state_ = state;
       os << "the Cholesky pivot of tangent coordinate " << col - factor_.start(q)
          << " of the state at " << state << " (free block " << b << " of " << sym.nb
          << ") keeps a fraction " << min_pivot_ratio_
@@ -794,6 +800,7 @@ class Covariance {
   CovarianceTimes times_;
   double min_pivot_ratio_ = std::numeric_limits<double>::infinity();
   double min_eigenvalue_ = std::numeric_limits<double>::quiet_NaN();
+  const void* deficient_state_ = nullptr;
   detail::CovarianceFactor factor_;
   std::unordered_map<const void*, Eigen::MatrixXd> diagonal_;
   std::map<Pair, Eigen::MatrixXd> pairs_;
