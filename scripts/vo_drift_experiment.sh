@@ -297,6 +297,7 @@ run_one() { # dir traj model anchors mode gt_w [extra correct options...]
   json_get "$dir.eval.json" error_2d
 }
 
+row_label() { if [ "$2" = map ]; then echo "$1 + map"; else echo "$1 (trajectory only)"; fi; }
 fmt() { case "$1" in fail | nan | n/a) echo "$1" ;; *) printf '%.2f' "$1" ;; esac; }
 diff_cell() { # scaled orig
   case "$1$2" in *fail* | *nan* | *n/a*) echo "–" ;; *) python3 -c 'import sys; print("%+.3f" % (float(sys.argv[1]) - float(sys.argv[2])))' "$1" "$2" ;; esac
@@ -385,7 +386,7 @@ for st in ${list//,/ }; do
   echo "$head"; echo "$sep"
   for v in "${variants[@]}"; do
     for mode in "${modes[@]}"; do
-      row="| $mode $([ "$v" = map ] && echo "+ map" || echo "(trajectory only)") |"
+      row="| $(row_label "$mode" "$v") |"
       for N in "${intervals[@]}"; do row="$row $(fmt "${res[$N,$mode,$v,1]}") |"; done
       echo "$row"
     done
@@ -399,7 +400,7 @@ for st in ${list//,/ }; do
   echo "$head"; echo "$sep"
   for v in "${variants[@]}"; do
     for mode in "${modes[@]}"; do
-      row="| $mode $([ "$v" = map ] && echo "+ map" || echo "(trajectory only)") |" any=0
+      row="| $(row_label "$mode" "$v") |" any=0
       for N in "${intervals[@]}"; do
         c=${res[$N,$mode,$v,cov]:--}
         [ "$c" != - ] && any=1
@@ -415,7 +416,7 @@ for st in ${list//,/ }; do
     echo "$head"; echo "$sep"
     for v in "${variants[@]}"; do
       for mode in "${modes[@]}"; do
-        row="| $mode $([ "$v" = map ] && echo "+ map" || echo "(trajectory only)") |"
+        row="| $(row_label "$mode" "$v") |"
         for N in "${intervals[@]}"; do row="$row $(diff_cell "${res[$N,$mode,$v,$s]}" "${res[$N,$mode,$v,1]}") |"; done
         echo "$row"
       done
@@ -428,7 +429,7 @@ for st in ${list//,/ }; do
     echo "$head"; echo "$sep"
     for v in "${variants[@]}"; do
       for mode in "${modes[@]}"; do
-        row="| $mode $([ "$v" = map ] && echo "+ map" || echo "(trajectory only)") |"
+        row="| $(row_label "$mode" "$v") |"
         for N in "${intervals[@]}"; do
           vals=() oracle=() outs=()
           for seed in "${seeds[@]}"; do
