@@ -20,6 +20,7 @@
 #include <geodrift/io/ply.hpp>
 #include <geodrift/io/svg.hpp>
 #include <geodrift/io/trajectory.hpp>
+#include <geodrift/io/trajectory_jumps.hpp>
 #include <geodrift/version.hpp>
 #include <map>
 #include <sstream>
@@ -112,6 +113,10 @@ options
                       bundle adjustment stops when a step lowers the cost by less than X
                       standard deviations of the cost at the noise level (sqrt(m/2) for m
                       scalar residuals); default 1, must be >= 0 (0: the solver's own limits)
+  --allow-jumps       correct a trajectory that jumps (a step faster than 10x the path's
+                      speed around it: a new SLAM map after lost tracking, or a corrupt pose;
+                      refused by default, as a pose graph across it bends the whole path);
+                      each jump is then named on stderr and in report.json
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --no-uncertainty    skip the per-keyframe uncertainty (sd_east/sd_north/cov_en left empty):
@@ -209,11 +214,12 @@ std::string local_scale_json(const correction::LocalScaleChoice& c) {
 }  // namespace
 
 int run_correct(int argc, char** argv) {
-  const Args args(argc, argv,
-                  {"trajectory", "format", "times", "map", "anchors", "mode", "origin",
-                   "keyframe-step", "links", "weights", "local-scale", "first-window",
-                   "min-window-keyframes", "ba-min-parallax", "ba-cost-tolerance-sd", "out"},
-                  {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty"});
+  const Args args(
+      argc, argv,
+      {"trajectory", "format", "times", "map", "anchors", "mode", "origin", "keyframe-step",
+       "links", "weights", "local-scale", "first-window", "min-window-keyframes", "ba-min-parallax",
+       "ba-cost-tolerance-sd", "out"},
+      {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty", "allow-jumps"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -294,6 +300,23 @@ int run_correct(int argc, char** argv) {
   const std::size_t np = traj.poses.size();
   if (np < 2)
     throw InvalidArgument(traj_path + ": needs at least 2 poses, has " + std::to_string(np));
+  // A path that jumps (io/trajectory_jumps.hpp): refused unless --allow-jumps.
+  const std::vector<io::TrajectoryJump> jumps = io::find_trajectory_jumps(traj);
+  if (!jumps.empty() && !args.flag("allow-jumps")) {
+    std::string others;
+    for (std::size_t i = 1; i < jumps.size(); ++i)
+      others += (i > 1 ? ", " : "") + std::to_string(traj.poses[jumps[i].index + 1].line);
+    throw InvalidArgument(
+        traj_path + ": the camera jumps " + io::describe_jump(traj, jumps[0]) +
+        (others.empty() ? "" : " (and before line(s) " + others + ")") +
+        ": a new SLAM map after lost tracking (another origin and unit) or a corrupt pose. A pose "
+        "graph across it bends the whole path: no trustworthy result, nothing written. Split the "
+        "trajectory there and correct each part with its own anchors, or pass --allow-jumps if "
+        "the motion is real");
+  }
+  for (const io::TrajectoryJump& jp : jumps)
+    std::fprintf(stderr, "geodrift correct: warning: %s: the camera jumps %s (--allow-jumps)\n",
+                 traj_path.c_str(), io::describe_jump(traj, jp).c_str());
 
   const io::AnchorTable table = io::read_anchors_csv(anchors_path);
   geo::LocalFrame frame;
@@ -658,7 +681,20 @@ int run_correct(int argc, char** argv) {
       << ", \"ba_cost_tolerance_sd\": " << json_num(opt.ba_cost_tolerance_sd) << "}"
       << ",\n  \"counts\": {\"poses\": " << np << ", \"keyframes\": " << nk
       << ", \"points\": " << corrector.num_points() << ", \"anchors\": " << anchors.size()
-      << ", \"correspondences_used\": " << corrector.correspondences().size() << "}"
+      << ", \"correspondences_used\": " << corrector.correspondences().size() << "}";
+    j << ",\n  \"trajectory_jumps\": {\"time_unit\": "
+      << io::detail::json_string(io::trajectory_time_unit(traj)) << ", \"jumps\": [";
+    for (std::size_t i = 0; i < jumps.size(); ++i) {
+      const io::TrajectoryJump& jp = jumps[i];
+      j << (i ? ", " : "") << "{\"line_from\": " << traj.poses[jp.index].line
+        << ", \"line_to\": " << traj.poses[jp.index + 1].line
+        << ", \"frame_from\": " << traj.poses[jp.index].frame
+        << ", \"frame_to\": " << traj.poses[jp.index + 1].frame
+        << ", \"step\": " << json_num(jp.step) << ", \"dt\": " << json_num(jp.dt)
+        << ", \"typical_speed\": " << json_num(jp.typical_speed)
+        << ", \"ratio\": " << json_num(jp.ratio) << "}";
+    }
+    j << "]}"
       << ",\n  \"init\": {\"ok\": " << (ir.ok ? "true" : "false")
       << ", \"message\": " << io::detail::json_string(ir.message)
       << ", \"scale_m_units_per_metre\": " << json_num(1.0 / ir.S_wm.scale())

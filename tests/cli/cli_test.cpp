@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <random>
@@ -169,6 +170,38 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     for (int i = 0; i < 39; ++i) times += std::to_string(0.1 * i) + "\n";
     expect_failure(correct(good, "--times " + t.write("t2.txt", times)),
                    {"t2.txt", "39 timestamps for 40"});
+  }
+  SECTION("a trajectory that jumps (a new map after lost tracking) unless --allow-jumps") {
+    std::istringstream in(trajectory_text());
+    std::string line, text;
+    for (int i = 0; std::getline(in, line); ++i) {
+      if (i >= 30) {  // from pose 30 on: 500 units east (poses 30..39 are lines 31..40)
+        std::istringstream f(line);
+        std::vector<double> v(12);
+        for (double& x : v) f >> x;
+        v[3] += 500;
+        std::ostringstream o;
+        for (double x : v) o << x << " ";
+        line = o.str();
+      }
+      text += line + "\n";
+    }
+    const std::string tj = t.write("jump.txt", text);
+    const std::string early = t.write("early.csv", anchors_text({3, 8, 13, 18}));
+    const std::string cmd = "correct --origin 49,8.4,100 --mode init --trajectory " + tj +
+                            " --anchors " + early + " --out " + t.file("out");
+    expect_failure(run(cmd), {"jump.txt", "jumps between lines 30 and 31", "frames 29 and 30",
+                              "new SLAM map", "--allow-jumps"});
+    const Run r = run(cmd + " --allow-jumps");
+    INFO(r.output);
+    REQUIRE(r.code == 0);
+    CHECK(r.output.find("warning") != std::string::npos);
+    std::ifstream rep(t.file("out/report.json"));
+    const std::string json((std::istreambuf_iterator<char>(rep)), std::istreambuf_iterator<char>());
+    CHECK(json_numbers(json, "line_from") == std::vector<double>{30});
+    CHECK(json_numbers(json, "frame_to") == std::vector<double>{30});
+    REQUIRE(json_numbers(json, "ratio").size() == 1);
+    CHECK(json_numbers(json, "ratio")[0] > 10);
   }
   SECTION("a missing file") {
     expect_failure(correct(t.file("no_such_anchors.csv")), {"no_such_anchors.csv"});

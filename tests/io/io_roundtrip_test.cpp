@@ -24,6 +24,7 @@
 #include "geodrift/io/ply.hpp"
 #include "geodrift/io/svg.hpp"
 #include "geodrift/io/trajectory.hpp"
+#include "geodrift/io/trajectory_jumps.hpp"
 #include "geodrift/version.hpp"
 #include "support/test_files.hpp"
 
@@ -669,5 +670,62 @@ TEST_CASE("Numbers are written in the shortest form that reads back exactly", "[
     const double v = u(rng) * std::pow(10.0, static_cast<int>(rng() % 21) - 10);
     INFO(v);
     CHECK(std::strtod(io::detail::fmt(v).c_str(), nullptr) == v);
+  }
+}
+
+TEST_CASE("Jumps in a trajectory: a new map mid-path is one, a gap in time is not",
+          "[io][trajectory][data]") {
+  const std::string dir = std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt";
+  for (const char* seq : {"02", "08"}) {
+    INFO("sequence " << seq);
+    const io::Trajectory gt = io::read_trajectory(dir + "/egusa_poses_with_times/" + seq + ".txt");
+    REQUIRE(gt.has_timestamps);
+    CHECK(std::string(io::trajectory_time_unit(gt)) == "s");
+    // Real driving (stops, turns, 10 Hz): no jump, in seconds, in frames, and in poses.
+    CHECK(io::find_trajectory_jumps(gt).empty());
+    io::Trajectory frames = gt;
+    frames.has_timestamps = false;
+    CHECK(std::string(io::trajectory_time_unit(frames)) == "frames");
+    CHECK(io::find_trajectory_jumps(frames).empty());
+
+    // A new SLAM map from pose 2000 on: its own origin there and a unit 0.3 of the old one.
+    const std::size_t cut = 2000;
+    io::Trajectory reset = gt;
+    const lie::SE3d T_new_old = gt.poses[cut].T_cw;  // the new map's frame = that camera
+    for (std::size_t i = cut; i < reset.poses.size(); ++i) {
+      const lie::SE3d T_wc = T_new_old * gt.poses[i].T_cw.inverse();
+      reset.poses[i].T_cw = lie::SE3d(T_wc.rotation(), 0.3 * T_wc.translation()).inverse();
+    }
+    std::vector<io::TrajectoryJump> j = io::find_trajectory_jumps(reset);
+    REQUIRE(j.size() == 1);
+    CHECK(j[0].index == cut - 1);
+    CHECK(j[0].ratio > 10.0);
+    // Unit-free: the same jump at any scale of the whole file.
+    io::Trajectory small = reset;
+    for (auto& p : small.poses) {
+      const lie::SE3d T_wc = p.T_cw.inverse();
+      p.T_cw = lie::SE3d(T_wc.rotation(), 1e-3 * T_wc.translation()).inverse();
+    }
+    const std::vector<io::TrajectoryJump> js = io::find_trajectory_jumps(small);
+    REQUIRE(js.size() == 1);
+    CHECK(js[0].index == cut - 1);
+    CHECK(js[0].ratio == Approx(j[0].ratio).epsilon(1e-9));
+
+    // 300 poses lost (tracking lost, relocalized in the same map): a long step over a long
+    // time, not a jump; the same file without times or frame numbers has one.
+    io::Trajectory gap = gt;
+    gap.poses.erase(gap.poses.begin() + 1500, gap.poses.begin() + 1800);
+    CHECK(io::find_trajectory_jumps(gap).empty());
+    io::Trajectory gap_frames = gap;
+    gap_frames.has_timestamps = false;
+    CHECK(io::find_trajectory_jumps(gap_frames).empty());
+    io::Trajectory gap_poses = gap_frames;
+    for (std::size_t i = 0; i < gap_poses.poses.size(); ++i)
+      gap_poses.poses[i].frame = static_cast<int>(i);
+    CHECK(std::string(io::trajectory_time_unit(gap_poses)) == "frames");
+    j = io::find_trajectory_jumps(gap_poses);
+    REQUIRE(j.size() == 1);
+    CHECK(j[0].index == 1499);
+    CHECK(io::describe_jump(gap_poses, j[0]).find("in 1 frame(s)") != std::string::npos);
   }
 }

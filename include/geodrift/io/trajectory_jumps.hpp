@@ -1,0 +1,135 @@
+#pragma once
+
+/// @file
+/// Places where an input trajectory jumps: two consecutive poses whose camera centres are far
+/// further apart than the path's own speed around them allows. A monocular SLAM that loses
+/// tracking and starts a new map (ORB-SLAM's Atlas, a DSO reset, two COLMAP models written one
+/// after the other) continues in a new frame with a new unit: its first pose lands near the new
+/// map's origin, so the camera seems to leap across the old map. A Sim(3) pose graph across
+/// such a step bends the whole path to absorb it (a 60 m reset in the middle of a 2 km
+/// stretch of our own VO, anchors every 100 frames: 7.1 m mean and 62 m maximum 2D error
+/// against 0.16 m without it, and a correct anchor blamed for it).
+///
+/// The test is unit-free: the speed of each step (camera-centre distance over the time between
+/// the poses: seconds where the file has increasing timestamps, else frame numbers, else poses)
+/// against the larger of the median speed of the steps around it and the median speed of the
+/// whole path. A vehicle or a hand-held camera cannot change speed tenfold from one pose to the
+/// next (our VO's keyframes: at most 2.6× the local median over 2 km), while a gap in time
+/// (tracking lost, then relocalized in the SAME map) divides a long step by a long time and is
+/// not a jump. What it cannot see: a new map whose origin happens to lie within a few steps of
+/// the old path (the unit and the frame change without a leap).
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "geodrift/io/trajectory.hpp"
+#include "geodrift/map/keyframe.hpp"
+
+namespace geodrift::io {
+
+/// One jump: from poses[index] to poses[index + 1].
+struct TrajectoryJump {
+  std::size_t index = 0;
+  double step = 0.0;           ///< camera-centre distance (the file's units)
+  double dt = 0.0;             ///< time between the poses (seconds, frames or poses: time_unit)
+  double speed = 0.0;          ///< step / dt
+  double typical_speed = 0.0;  ///< the larger of the local and the whole path's median speed
+  double ratio = 0.0;          ///< speed / typical_speed
+};
+
+struct TrajectoryJumpOptions {
+  int window = 25;          ///< steps on each side for the local median speed
+  double max_ratio = 10.0;  ///< a step faster than this × the typical speed is a jump
+};
+
+/// The time base the jump test used: "s" (increasing timestamps), "frames" (increasing frame
+/// numbers) or "poses" (neither).
+inline const char* trajectory_time_unit(const Trajectory& t) {
+  const auto increasing = [&](auto value) {
+    for (std::size_t i = 1; i < t.poses.size(); ++i) {
+      const double a = value(t.poses[i - 1]), b = value(t.poses[i]);
+      if (!(std::isfinite(a) && std::isfinite(b) && b > a)) return false;
+    }
+    return true;
+  };
+  if (t.has_timestamps && increasing([](const TrajectoryPose& p) { return p.timestamp; }))
+    return "s";
+  if (increasing([](const TrajectoryPose& p) { return static_cast<double>(p.frame); }))
+    return "frames";
+  return "poses";
+}
+
+/// Every jump of `t` (see the file comment), in path order. O(n) plus a local median per step
+/// that is faster than max_ratio × the whole path's median (the only ones that can be jumps).
+/// A path whose median speed is zero (mostly standing still) reports none. Steps to or from a
+/// camera centre beyond map::kMaxMapCoordinate are left out (not a jump: a value the
+/// correction refuses by itself, naming it).
+inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
+                                                         const TrajectoryJumpOptions& o = {}) {
+  std::vector<TrajectoryJump> jumps;
+  const std::size_t n = t.poses.size();
+  if (n < 3) return jumps;
+  const std::string unit = trajectory_time_unit(t);
+  std::vector<double> speed(n - 1), dts(n - 1), steps(n - 1), all;  // all: the finite speeds
+  const auto representable = [](const Eigen::Vector3d& c) {
+    return c.allFinite() && c.cwiseAbs().maxCoeff() <= map::kMaxMapCoordinate;
+  };
+  Eigen::Vector3d prev = t.poses[0].T_cw.inverse().translation();
+  for (std::size_t i = 0; i + 1 < n; ++i) {
+    const Eigen::Vector3d c = t.poses[i + 1].T_cw.inverse().translation();
+    steps[i] = representable(prev) && representable(c) ? (c - prev).norm()
+                                                       : std::numeric_limits<double>::quiet_NaN();
+    prev = c;
+    const TrajectoryPose &a = t.poses[i], &b = t.poses[i + 1];
+    dts[i] = unit == "s"        ? b.timestamp - a.timestamp
+             : unit == "frames" ? static_cast<double>(b.frame - a.frame)
+                                : 1.0;
+    speed[i] = steps[i] / dts[i];
+    if (std::isfinite(speed[i])) all.push_back(speed[i]);
+  }
+  if (all.empty()) return jumps;
+  const auto median = [](std::vector<double> v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  const double global = median(std::move(all));
+  if (!(global > 0.0)) return jumps;
+  const std::size_t m = speed.size(), w = static_cast<std::size_t>(std::max(o.window, 1));
+  std::vector<double> around;
+  for (std::size_t i = 0; i < m; ++i) {
+    if (!(speed[i] > o.max_ratio * global)) continue;
+    around.clear();
+    for (std::size_t k = i > w ? i - w : 0; k < std::min(m, i + w + 1); ++k)
+      if (k != i && std::isfinite(speed[k])) around.push_back(speed[k]);
+    const double typical = std::max(global, around.empty() ? 0.0 : median(around));
+    if (speed[i] > o.max_ratio * typical)
+      jumps.push_back({i, steps[i], dts[i], speed[i], typical, speed[i] / typical});
+  }
+  return jumps;
+}
+
+/// "between lines 321 and 322 (frames 1064 and 1065): 31.2 units in 1 frame(s), 212× the
+/// path's speed around it"; lines are the file's when it was read from one.
+inline std::string describe_jump(const Trajectory& t, const TrajectoryJump& j) {
+  const TrajectoryPose &a = t.poses[j.index], &b = t.poses[j.index + 1];
+  const std::string unit = trajectory_time_unit(t);
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "between lines %d and %d (frames %d and %d): %.4g units in %.4g %s, %.3g x the "
+                "path's speed around it",
+                a.line, b.line, a.frame, b.frame, j.step, j.dt,
+                unit == "s"        ? "s"
+                : unit == "frames" ? "frame(s)"
+                                   : "pose(s)",
+                j.ratio);
+  return buf;
+}
+
+}  // namespace geodrift::io
