@@ -76,21 +76,25 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
   const std::size_t n = t.poses.size();
   if (n < 3) return jumps;
   const std::string unit = trajectory_time_unit(t);
-  std::vector<double> speed(n - 1), dts(n - 1), steps(n - 1), all;  // all: the finite speeds
+  const auto centre = [&](std::size_t i) { return t.poses[i].T_cw.inverse().translation(); };
   const auto representable = [](const Eigen::Vector3d& c) {
     return c.allFinite() && c.cwiseAbs().maxCoeff() <= map::kMaxMapCoordinate;
   };
-  Eigen::Vector3d prev = t.poses[0].T_cw.inverse().translation();
-  for (std::size_t i = 0; i + 1 < n; ++i) {
-    const Eigen::Vector3d c = t.poses[i + 1].T_cw.inverse().translation();
-    steps[i] = representable(prev) && representable(c) ? (c - prev).norm()
-                                                       : std::numeric_limits<double>::quiet_NaN();
-    prev = c;
+  const auto step = [&](std::size_t i) {  // poses i -> i + 1
+    const Eigen::Vector3d a = centre(i), b = centre(i + 1);
+    return representable(a) && representable(b) ? (b - a).norm()
+                                                : std::numeric_limits<double>::quiet_NaN();
+  };
+  const auto dt = [&](std::size_t i) {
     const TrajectoryPose &a = t.poses[i], &b = t.poses[i + 1];
-    dts[i] = unit == "s"        ? b.timestamp - a.timestamp
-             : unit == "frames" ? static_cast<double>(b.frame - a.frame)
-                                : 1.0;
-    speed[i] = steps[i] / dts[i];
+    return unit == "s"        ? b.timestamp - a.timestamp
+           : unit == "frames" ? static_cast<double>(b.frame - a.frame)
+                              : 1.0;
+  };
+  std::vector<double> speed(n - 1), all;  // all: the finite speeds
+  all.reserve(n - 1);
+  for (std::size_t i = 0; i + 1 < n; ++i) {
+    speed[i] = step(i) / dt(i);
     if (std::isfinite(speed[i])) all.push_back(speed[i]);
   }
   if (all.empty()) return jumps;
@@ -110,7 +114,7 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
       if (k != i && std::isfinite(speed[k])) around.push_back(speed[k]);
     const double typical = std::max(global, around.empty() ? 0.0 : median(around));
     if (speed[i] > o.max_ratio * typical)
-      jumps.push_back({i, steps[i], dts[i], speed[i], typical, speed[i] / typical});
+      jumps.push_back({i, step(i), dt(i), speed[i], typical, speed[i] / typical});
   }
   return jumps;
 }
