@@ -116,7 +116,8 @@ options
   --allow-jumps       correct a trajectory that jumps (a step faster than 10x the path's
                       speed around it: a new SLAM map after lost tracking, or a corrupt pose;
                       refused by default, as a pose graph across it bends the whole path);
-                      each jump is then named on stderr and in report.json
+                      each jump is then named on stderr and in report.json (as is, always,
+                      a suspect step: faster than 4x)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --no-uncertainty    skip the per-keyframe uncertainty (sd_east/sd_north/cov_en left empty):
@@ -300,8 +301,16 @@ int run_correct(int argc, char** argv) {
   const std::size_t np = traj.poses.size();
   if (np < 2)
     throw InvalidArgument(traj_path + ": needs at least 2 poses, has " + std::to_string(np));
-  // A path that jumps (io/trajectory_jumps.hpp): refused unless --allow-jumps.
-  const std::vector<io::TrajectoryJump> jumps = io::find_trajectory_jumps(traj);
+  // A path that jumps (io/trajectory_jumps.hpp): refused unless --allow-jumps; a suspect step
+  // (between kSuspectJumpRatio and the jump ratio) is a warning.
+  const io::TrajectoryJumpOptions jump_options;
+  io::TrajectoryJumpOptions suspect_options = jump_options;
+  suspect_options.max_ratio = io::kSuspectJumpRatio;
+  const std::vector<io::TrajectoryJump> steps_flagged =
+      io::find_trajectory_jumps(traj, suspect_options);
+  std::vector<io::TrajectoryJump> jumps;
+  for (const io::TrajectoryJump& jp : steps_flagged)
+    if (jp.ratio > jump_options.max_ratio) jumps.push_back(jp);
   if (!jumps.empty() && !args.flag("allow-jumps")) {
     std::string others;
     for (std::size_t i = 1; i < jumps.size(); ++i)
@@ -314,9 +323,16 @@ int run_correct(int argc, char** argv) {
         "trajectory there and correct each part with its own anchors, or pass --allow-jumps if "
         "the motion is real");
   }
-  for (const io::TrajectoryJump& jp : jumps)
-    std::fprintf(stderr, "geodrift correct: warning: %s: the camera jumps %s (--allow-jumps)\n",
-                 traj_path.c_str(), io::describe_jump(traj, jp).c_str());
+  for (const io::TrajectoryJump& jp : steps_flagged) {
+    if (jp.ratio > jump_options.max_ratio)
+      std::fprintf(stderr, "geodrift correct: warning: %s: the camera jumps %s (--allow-jumps)\n",
+                   traj_path.c_str(), io::describe_jump(traj, jp).c_str());
+    else
+      std::fprintf(stderr,
+                   "geodrift correct: warning: %s: a suspect step %s: if the SLAM started a new "
+                   "map there, the correction across it is wrong (split the trajectory there)\n",
+                   traj_path.c_str(), io::describe_jump(traj, jp).c_str());
+  }
 
   const io::AnchorTable table = io::read_anchors_csv(anchors_path);
   geo::LocalFrame frame;
@@ -683,16 +699,19 @@ int run_correct(int argc, char** argv) {
       << ", \"points\": " << corrector.num_points() << ", \"anchors\": " << anchors.size()
       << ", \"correspondences_used\": " << corrector.correspondences().size() << "}";
     j << ",\n  \"trajectory_jumps\": {\"time_unit\": "
-      << io::detail::json_string(io::trajectory_time_unit(traj)) << ", \"jumps\": [";
-    for (std::size_t i = 0; i < jumps.size(); ++i) {
-      const io::TrajectoryJump& jp = jumps[i];
+      << io::detail::json_string(io::trajectory_time_unit(traj))
+      << ", \"jump_ratio\": " << json_num(jump_options.max_ratio)
+      << ", \"suspect_ratio\": " << json_num(suspect_options.max_ratio) << ", \"steps\": [";
+    for (std::size_t i = 0; i < steps_flagged.size(); ++i) {
+      const io::TrajectoryJump& jp = steps_flagged[i];
       j << (i ? ", " : "") << "{\"line_from\": " << traj.poses[jp.index].line
         << ", \"line_to\": " << traj.poses[jp.index + 1].line
         << ", \"frame_from\": " << traj.poses[jp.index].frame
         << ", \"frame_to\": " << traj.poses[jp.index + 1].frame
         << ", \"step\": " << json_num(jp.step) << ", \"dt\": " << json_num(jp.dt)
         << ", \"typical_speed\": " << json_num(jp.typical_speed)
-        << ", \"ratio\": " << json_num(jp.ratio) << "}";
+        << ", \"ratio\": " << json_num(jp.ratio)
+        << ", \"jump\": " << (jp.ratio > jump_options.max_ratio ? "true" : "false") << "}";
     }
     j << "]}"
       << ",\n  \"init\": {\"ok\": " << (ir.ok ? "true" : "false")

@@ -172,24 +172,31 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
                    {"t2.txt", "39 timestamps for 40"});
   }
   SECTION("a trajectory that jumps (a new map after lost tracking) unless --allow-jumps") {
-    std::istringstream in(trajectory_text());
-    std::string line, text;
-    for (int i = 0; std::getline(in, line); ++i) {
-      if (i >= 30) {  // from pose 30 on: 500 units east (poses 30..39 are lines 31..40)
-        std::istringstream f(line);
-        std::vector<double> v(12);
-        for (double& x : v) f >> x;
-        v[3] += 500;
-        std::ostringstream o;
-        for (double x : v) o << x << " ";
-        line = o.str();
+    // From pose 30 on (lines 31..40) `shift` units east.
+    const auto shifted = [&](double shift) {
+      std::istringstream in(trajectory_text());
+      std::string line, text;
+      for (int i = 0; std::getline(in, line); ++i) {
+        if (i >= 30) {
+          std::istringstream f(line);
+          std::vector<double> v(12);
+          for (double& x : v) f >> x;
+          v[3] += shift;
+          std::ostringstream o;
+          for (double x : v) o << x << " ";
+          line = o.str();
+        }
+        text += line + "\n";
       }
-      text += line + "\n";
-    }
-    const std::string tj = t.write("jump.txt", text);
+      return text;
+    };
+    const std::string tj = t.write("jump.txt", shifted(500));
     const std::string early = t.write("early.csv", anchors_text({3, 8, 13, 18}));
-    const std::string cmd = "correct --origin 49,8.4,100 --mode init --trajectory " + tj +
-                            " --anchors " + early + " --out " + t.file("out");
+    const auto command = [&](const std::string& traj) {
+      return "correct --origin 49,8.4,100 --mode init --trajectory " + traj + " --anchors " +
+             early + " --out " + t.file("out");
+    };
+    const std::string cmd = command(tj);
     expect_failure(run(cmd), {"jump.txt", "jumps between lines 30 and 31", "frames 29 and 30",
                               "new SLAM map", "--allow-jumps"});
     const Run r = run(cmd + " --allow-jumps");
@@ -202,6 +209,19 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     CHECK(json_numbers(json, "frame_to") == std::vector<double>{30});
     REQUIRE(json_numbers(json, "ratio").size() == 1);
     CHECK(json_numbers(json, "ratio")[0] > 10);
+    CHECK(json.find("\"jump\": true") != std::string::npos);
+    // A 4-unit leap (about 7x the step): a warning naming it, and the correction runs.
+    const Run s = run(command(t.write("suspect.txt", shifted(4))) + " --force");
+    INFO(s.output);
+    REQUIRE(s.code == 0);
+    CHECK(s.output.find("suspect step between lines 30 and 31") != std::string::npos);
+    std::ifstream rep2(t.file("out/report.json"));
+    const std::string json2((std::istreambuf_iterator<char>(rep2)),
+                            std::istreambuf_iterator<char>());
+    REQUIRE(json_numbers(json2, "ratio").size() == 1);
+    CHECK(json_numbers(json2, "ratio")[0] > 4);
+    CHECK(json_numbers(json2, "ratio")[0] < 10);
+    CHECK(json2.find("\"jump\": false") != std::string::npos);
   }
   SECTION("a missing file") {
     expect_failure(correct(t.file("no_such_anchors.csv")), {"no_such_anchors.csv"});

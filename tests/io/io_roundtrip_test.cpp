@@ -711,6 +711,23 @@ TEST_CASE("Jumps in a trajectory: a new map mid-path is one, a gap in time is no
     CHECK(js[0].index == cut - 1);
     CHECK(js[0].ratio == Approx(j[0].ratio).epsilon(1e-9));
 
+    // A 6 m leap with the same frame and unit: suspect (a warning), not a jump.
+    io::Trajectory leap = gt;
+    for (std::size_t i = cut; i < leap.poses.size(); ++i) {
+      const lie::SE3d T_wc = gt.poses[i].T_cw.inverse();
+      leap.poses[i].T_cw =
+          lie::SE3d(T_wc.rotation(), T_wc.translation() + Eigen::Vector3d(6, 0, 0)).inverse();
+    }
+    CHECK(io::find_trajectory_jumps(leap).empty());
+    io::TrajectoryJumpOptions suspect;
+    suspect.max_ratio = io::kSuspectJumpRatio;
+    j = io::find_trajectory_jumps(leap, suspect);
+    REQUIRE(j.size() == 1);
+    CHECK(j[0].index == cut - 1);
+    CHECK(j[0].ratio > io::kSuspectJumpRatio);
+    CHECK(j[0].ratio < 10.0);
+    CHECK(io::find_trajectory_jumps(gt, suspect).empty());
+
     // 300 poses lost (tracking lost, relocalized in the same map): a long step over a long
     // time, not a jump; the same file without times or frame numbers has one.
     io::Trajectory gap = gt;
