@@ -323,7 +323,9 @@ int run_correct(int argc, char** argv) {
         "trajectory there and correct each part with its own anchors, or pass --allow-jumps if "
         "the motion is real");
   }
-  for (const io::TrajectoryJump& jp : steps_flagged) {
+  constexpr std::size_t kMaxNamed = 10;  // on stderr; report.json lists them all
+  for (std::size_t i = 0; i < std::min(steps_flagged.size(), kMaxNamed); ++i) {
+    const io::TrajectoryJump& jp = steps_flagged[i];
     if (jp.ratio > jump_options.max_ratio)
       std::fprintf(stderr, "geodrift correct: warning: %s: the camera jumps %s (--allow-jumps)\n",
                    traj_path.c_str(), io::describe_jump(traj, jp).c_str());
@@ -333,6 +335,9 @@ int run_correct(int argc, char** argv) {
                    "map there, the correction across it is wrong (split the trajectory there)\n",
                    traj_path.c_str(), io::describe_jump(traj, jp).c_str());
   }
+  if (steps_flagged.size() > kMaxNamed)
+    std::fprintf(stderr, "geodrift correct: warning: %s: %zu more such steps (report.json)\n",
+                 traj_path.c_str(), steps_flagged.size() - kMaxNamed);
 
   const io::AnchorTable table = io::read_anchors_csv(anchors_path);
   geo::LocalFrame frame;

@@ -43,6 +43,7 @@ struct TrajectoryJump {
   double speed = 0.0;          ///< step / dt
   double typical_speed = 0.0;  ///< the larger of the local and the whole path's median speed
   double ratio = 0.0;          ///< speed / typical_speed
+  const char* time_unit = "";  ///< dt's unit: trajectory_time_unit()
 };
 
 /// A step this many times faster than the path around it is suspect (`geodrift correct` warns):
@@ -82,7 +83,8 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
   std::vector<TrajectoryJump> jumps;
   const std::size_t n = t.poses.size();
   if (n < 3) return jumps;
-  const std::string unit = trajectory_time_unit(t);
+  const char* unit = trajectory_time_unit(t);
+  const bool seconds = unit[0] == 's', frames = unit[0] == 'f';
   const auto centre = [&](std::size_t i) { return t.poses[i].T_cw.inverse().translation(); };
   const auto representable = [](const Eigen::Vector3d& c) {
     return c.allFinite() && c.cwiseAbs().maxCoeff() <= map::kMaxMapCoordinate;
@@ -94,9 +96,9 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
   };
   const auto dt = [&](std::size_t i) {
     const TrajectoryPose &a = t.poses[i], &b = t.poses[i + 1];
-    return unit == "s"        ? b.timestamp - a.timestamp
-           : unit == "frames" ? static_cast<double>(b.frame - a.frame)
-                              : 1.0;
+    return seconds  ? b.timestamp - a.timestamp
+           : frames ? static_cast<double>(b.frame - a.frame)
+                    : 1.0;
   };
   std::vector<double> speed(n - 1), all;  // all: the finite speeds
   all.reserve(n - 1);
@@ -121,7 +123,7 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
       if (k != i && std::isfinite(speed[k])) around.push_back(speed[k]);
     const double typical = std::max(global, around.empty() ? 0.0 : median(around));
     if (speed[i] > o.max_ratio * typical)
-      jumps.push_back({i, step(i), dt(i), speed[i], typical, speed[i] / typical});
+      jumps.push_back({i, step(i), dt(i), speed[i], typical, speed[i] / typical, unit});
   }
   return jumps;
 }
@@ -130,7 +132,7 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
 /// path's speed around it"; lines are the file's when it was read from one.
 inline std::string describe_jump(const Trajectory& t, const TrajectoryJump& j) {
   const TrajectoryPose &a = t.poses[j.index], &b = t.poses[j.index + 1];
-  const std::string unit = trajectory_time_unit(t);
+  const std::string unit = j.time_unit;
   char buf[320];
   std::snprintf(buf, sizeof buf,
                 "between lines %d and %d (frames %d and %d): %.4g units in %.4g %s, %.3g x the "
