@@ -134,6 +134,7 @@ outputs in DIR (every file states frame, units and the geodrift version)
   track.geojson, track.kml                   path + anchors (WGS84)
   points.ply          corrected map points in W (with --map)
   topview.svg         corrected path, anchors and 95 % uncertainty ellipses, top view
+                      (and where the input path jumps or takes a suspect step)
   scale.svg           local scale of the corrected keyframes (no ground truth here)
   report.json         version, command line, parameters, INIT result, per-step timings
 )";
@@ -606,6 +607,13 @@ int run_correct(int argc, char** argv) {
                                   anchors[j].y_w.head<2>(), "#d62728"}
                   : io::SvgMarker{"REJECTED anchor line " + std::to_string(anchors[j].line),
                                   anchors[j].y_w.head<2>(), "#7f7f7f"});
+    for (const io::TrajectoryJump& jp : steps_flagged) {  // where the path jumps or may
+      char label[96];
+      std::snprintf(label, sizeof label, "%s line %d (%.3g x)",
+                    jp.ratio > jump_options.max_ratio ? "JUMP before" : "SUSPECT STEP before",
+                    traj.poses[jp.index + 1].line, jp.ratio);
+      markers.push_back({label, track[jp.index + 1].head<2>(), "#ff7f0e"});
+    }
     // At most about 150 ellipses: every n-th keyframe and the last one.
     std::vector<io::SvgEllipse> ellipses;
     if (unc.ok) {

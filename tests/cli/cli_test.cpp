@@ -222,6 +222,9 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     CHECK(json_numbers(json2, "ratio")[0] > 4);
     CHECK(json_numbers(json2, "ratio")[0] < 10);
     CHECK(json2.find("\"jump\": false") != std::string::npos);
+    std::ifstream svg(t.file("out/topview.svg"));
+    const std::string top((std::istreambuf_iterator<char>(svg)), std::istreambuf_iterator<char>());
+    CHECK(top.find("SUSPECT STEP before line 31") != std::string::npos);
   }
   SECTION("a missing file") {
     expect_failure(correct(t.file("no_such_anchors.csv")), {"no_such_anchors.csv"});
