@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
-#include <iterator>
 #include <limits>
 #include <map>
 #include <random>
@@ -203,8 +202,7 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     INFO(r.output);
     REQUIRE(r.code == 0);
     CHECK(r.output.find("warning") != std::string::npos);
-    std::ifstream rep(t.file("out/report.json"));
-    const std::string json((std::istreambuf_iterator<char>(rep)), std::istreambuf_iterator<char>());
+    const std::string json = geodrift::test::read_text(t.file("out/report.json"));
     CHECK(json_numbers(json, "line_from") == std::vector<double>{30});
     CHECK(json_numbers(json, "frame_to") == std::vector<double>{30});
     REQUIRE(json_numbers(json, "ratio").size() == 1);
@@ -215,16 +213,14 @@ TEST_CASE("geodrift correct rejects bad input with a message, non-zero exit, no 
     INFO(s.output);
     REQUIRE(s.code == 0);
     CHECK(s.output.find("suspect step between lines 30 and 31") != std::string::npos);
-    std::ifstream rep2(t.file("out/report.json"));
-    const std::string json2((std::istreambuf_iterator<char>(rep2)),
-                            std::istreambuf_iterator<char>());
+    const std::string json2 = geodrift::test::read_text(t.file("out/report.json"));
     REQUIRE(json_numbers(json2, "ratio").size() == 1);
     CHECK(json_numbers(json2, "ratio")[0] > 4);
     CHECK(json_numbers(json2, "ratio")[0] < 10);
     CHECK(json2.find("\"jump\": false") != std::string::npos);
-    std::ifstream svg(t.file("out/topview.svg"));
-    const std::string top((std::istreambuf_iterator<char>(svg)), std::istreambuf_iterator<char>());
-    CHECK(top.find("SUSPECT STEP before line 31") != std::string::npos);
+    CHECK(
+        geodrift::test::read_text(t.file("out/topview.svg")).find("SUSPECT STEP before line 31") !=
+        std::string::npos);
   }
   SECTION("a missing file") {
     expect_failure(correct(t.file("no_such_anchors.csv")), {"no_such_anchors.csv"});
