@@ -859,6 +859,42 @@ TEMPLATE_TEST_CASE(
   }
 }
 
+TEST_CASE("Geodesic acceleration right-hand side tends to Jᵀ·r'' as h shrinks, at first order",
+          "[solver][acceleration]") {
+  // The library's one-sided difference (e at x ⊞ h·v against e and J kept from x) has the limit
+  // J(x)ᵀ·r''_v, r''_v the second directional derivative: here a central difference, ε = 1e-4.
+  PoseGraph<lie::Sim3d> a(30, 0.02, 41), b(30, 0.02, 41);
+  Problem pa, pb;
+  a.build(&pa);
+  b.build(&pb);
+  pa.finalize();
+  pb.finalize();
+  const Eigen::VectorXd v = random_step(pa.num_effective_parameters(), 0.02, 5);
+  Eigen::SparseMatrix<double> J, Jp, Jm;
+  Eigen::VectorXd e, ep, em;
+  REQUIRE(pb.evaluate_jacobian(&J, &e));
+  const double eps = 1e-4;
+  const Eigen::VectorXd sv = eps * v, msv = -eps * v;
+  pb.save_state();
+  pb.plus(sv.data());
+  REQUIRE(pb.evaluate_jacobian(&Jp, &ep));
+  pb.restore_state();
+  pb.plus(msv.data());
+  REQUIRE(pb.evaluate_jacobian(&Jm, &em));
+  pb.restore_state();
+  const Eigen::VectorXd ref = J.transpose() * ((ep - 2.0 * e + em) / (eps * eps));
+  // h = 0.1 (the default) and 0.01; smaller h would meet the reference's own rounding.
+  const double err_1 = relative_difference(library_acceleration(&pa, v, 1e-1), ref);
+  const double err_2 = relative_difference(library_acceleration(&pa, v, 1e-2), ref);
+  INFO("|ref| " << ref.lpNorm<Eigen::Infinity>() << " error at h = 0.1 " << err_1
+                << ", at 0.01 " << err_2);
+  CHECK(ref.lpNorm<Eigen::Infinity>() > 1e-3);
+  CHECK(err_1 < 1e-2);
+  CHECK(err_2 < 1e-3);
+  CHECK(err_1 / err_2 > 5.0);  // O(h): a tenth of h, about a tenth of the error
+  CHECK(err_1 / err_2 < 20.0);
+}
+
 TEST_CASE("Geodesic acceleration right-hand side for BA with Huber and constant cameras",
           "[solver][acceleration]") {
   const double h = 0.1;
