@@ -9,6 +9,7 @@
 #include <geodrift/correction/local_scale.hpp>
 #include <geodrift/correction/replay.hpp>
 #include <geodrift/correction/screening.hpp>
+#include <geodrift/correction/time_offset.hpp>
 #include <geodrift/correction/uncertainty.hpp>
 #include <geodrift/error.hpp>
 #include <geodrift/geo/local_frame.hpp>
@@ -118,6 +119,13 @@ options
                       refused by default, as a pose graph across it bends the whole path);
                       each jump is then named on stderr and in report.json (as is, always,
                       a suspect step: faster than 4x)
+  --anchor-time-offset S
+                      seconds to add to the anchors' timestamps to get the trajectory's clock
+                      (anchors placed by a timestamp only; a 'frame' column is exact), or auto:
+                      the offset estimated from the path's turns, applied when significant.
+                      Without it the offset is estimated and a significant one is warned about
+                      (a logging latency, GPS time against UTC: 18 s); report.json
+                      "anchor_time_offset" (correction/time_offset.hpp)
   --out DIR           output directory (created; must not exist or be empty unless --force)
   --force             write into an existing non-empty --out (replaces geodrift's own files)
   --no-uncertainty    skip the per-keyframe uncertainty (sd_east/sd_north/cov_en left empty):
@@ -220,7 +228,7 @@ int run_correct(int argc, char** argv) {
       argc, argv,
       {"trajectory", "format", "times", "map", "anchors", "mode", "origin", "keyframe-step",
        "links", "weights", "local-scale", "first-window", "min-window-keyframes", "ba-min-parallax",
-       "ba-cost-tolerance-sd", "out"},
+       "ba-cost-tolerance-sd", "anchor-time-offset", "out"},
       {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty", "allow-jumps"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
@@ -278,6 +286,14 @@ int run_correct(int argc, char** argv) {
   if (!(opt.ba_min_parallax_deg >= 0 && opt.ba_min_parallax_deg < 90))
     throw UsageError("--ba-min-parallax must be in [0, 90) degrees");
   if (!(opt.ba_cost_tolerance_sd >= 0)) throw UsageError("--ba-cost-tolerance-sd must be >= 0");
+  const bool time_offset_auto = args.get("anchor-time-offset", "") == "auto";
+  double time_offset = 0.0;  // applied to the anchors placed by timestamp
+  if (args.has("anchor-time-offset") && !time_offset_auto) {
+    time_offset = number_option(args, "anchor-time-offset", 0.0);
+    if (!(std::abs(time_offset) <= 1e6))
+      throw UsageError("--anchor-time-offset takes auto or seconds in [-1e6, 1e6], not " +
+                       args.get("anchor-time-offset"));
+  }
   {
     std::string why;
     if (!opt.validate(&why)) throw UsageError("invalid correction options: " + why);
@@ -352,6 +368,54 @@ int run_correct(int argc, char** argv) {
     frame = io::local_frame_at_first_anchor(table);
   }
   std::vector<io::Anchor> anchors = io::anchors_in_world(table, frame);
+  // The anchors' clock against the trajectory's (correction/time_offset.hpp): the given offset
+  // applied, then the remaining one estimated from the path's turns.
+  std::vector<std::size_t> timed;  // anchors placed by their timestamp
+  for (std::size_t i = 0; i < anchors.size(); ++i)
+    if (anchors[i].frame < 0 && std::isfinite(anchors[i].timestamp)) timed.push_back(i);
+  if (args.has("anchor-time-offset") && timed.empty())
+    throw UsageError("--anchor-time-offset: no anchor of " + anchors_path +
+                     " is placed by its timestamp (anchors with a 'frame' are placed by it)");
+  for (std::size_t i : timed) anchors[i].timestamp += time_offset;
+  correction::TimeOffsetEstimate clock;
+  if (timed.empty()) {
+    clock.reason = "no anchor is placed by its timestamp";
+  } else if (!traj.has_timestamps) {
+    clock.reason = "the trajectory has no timestamps";
+  } else {
+    std::vector<double> times, anchor_times;
+    std::vector<Eigen::Vector3d> centres, anchor_positions;
+    for (const io::TrajectoryPose& p : traj.poses) {
+      times.push_back(p.timestamp);
+      centres.push_back(p.T_cw.inverse().translation());
+    }
+    for (std::size_t i : timed) {
+      anchor_times.push_back(anchors[i].timestamp);
+      anchor_positions.push_back(anchors[i].y_w);
+    }
+    clock = correction::estimate_anchor_time_offset(times, centres, anchor_times, anchor_positions);
+  }
+  // The offset to add to the file's timestamps: the given one plus the estimate on top of it.
+  const double clock_total = time_offset + clock.offset;
+  if (clock.significant) {
+    char buf[512];
+    std::snprintf(buf, sizeof buf,
+                  "%s: the anchors fit the path best with %+.3f s (sd %.3f s) added to their "
+                  "timestamps (windowed RMS %.2f m -> %.2f m over %d windows of %d anchors)%s",
+                  anchors_path.c_str(), clock_total, clock.sd, clock.rms_at_zero,
+                  clock.rms_at_estimate, clock.windows, correction::kTimeOffsetWindow,
+                  clock.at_edge ? ", at the edge of the search: the offset may be larger" : "");
+    if (time_offset_auto && !clock.at_edge) {
+      std::fprintf(stderr, "geodrift correct: %s; applied (--anchor-time-offset auto)\n", buf);
+      time_offset = clock.offset;
+      for (std::size_t i : timed) anchors[i].timestamp += time_offset;
+    } else {
+      std::fprintf(stderr,
+                   "geodrift correct: warning: %s: the anchors' clock and the trajectory's may "
+                   "differ; check them, or pass --anchor-time-offset %.3f (or auto)\n",
+                   buf, clock_total);
+    }
+  }
   std::vector<io::AnchorLocation> locs = io::locate_anchors(anchors, traj, anchors_path);
   {  // time order
     std::vector<std::size_t> order(anchors.size());
@@ -726,7 +790,22 @@ int run_correct(int argc, char** argv) {
         << ", \"ratio\": " << json_num(jp.ratio)
         << ", \"jump\": " << (jp.ratio > jump_options.max_ratio ? "true" : "false") << "}";
     }
-    j << "]}"
+    j << "]}";
+    j << ",\n  \"anchor_time_offset\": {\"applied\": " << json_num(time_offset)
+      << ", \"auto\": " << (time_offset_auto ? "true" : "false")
+      << ", \"estimated\": " << (clock.estimated ? "true" : "false");
+    if (clock.estimated)
+      j << ", \"estimate\": " << json_num(clock_total) << ", \"sd\": " << json_num(clock.sd)
+        << ", \"searched\": " << json_num(clock.searched) << ", \"windows\": " << clock.windows
+        << ", \"anchors\": " << clock.anchors
+        << ", \"rms_at_zero\": " << json_num(clock.rms_at_zero)
+        << ", \"rms_at_estimate\": " << json_num(clock.rms_at_estimate)
+        << ", \"statistic\": " << json_num(clock.statistic)
+        << ", \"significant\": " << (clock.significant ? "true" : "false")
+        << ", \"at_edge\": " << (clock.at_edge ? "true" : "false");
+    else
+      j << ", \"reason\": " << io::detail::json_string(clock.reason);
+    j << "}"
       << ",\n  \"init\": {\"ok\": " << (ir.ok ? "true" : "false")
       << ", \"message\": " << io::detail::json_string(ir.message)
       << ", \"scale_m_units_per_metre\": " << json_num(1.0 / ir.S_wm.scale())

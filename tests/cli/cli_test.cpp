@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "geodrift/correction/time_offset.hpp"
 #include "geodrift/io/anchors.hpp"
 #include "geodrift/io/csv.hpp"
 #include "geodrift/io/trajectory.hpp"
@@ -735,4 +736,104 @@ TEST_CASE("eval associates a TUM keyframe result with 100 Hz ground truth by tim
     CHECK(nt.code == 1);
     CHECK(nt.output.find("gt_kitti.txt has no timestamps") != std::string::npos);
   }
+}
+
+TEST_CASE("correct finds an offset between the anchors' clock and the trajectory's",
+          "[cli][time_offset]") {
+  // 150 s of KITTI 02 as a TUM trajectory in M (the ground truth at a tenth of its unit), and
+  // timestamped anchors every 5 s whose clock runs 0.7 s behind the camera's: each was taken
+  // where the camera was 0.7 s after its timestamp (7–9 m further along the road).
+  namespace io = geodrift::io;
+  namespace lie = geodrift::lie;
+  namespace correction = geodrift::correction;
+  geodrift::test::TempDir t;
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const io::Trajectory gt = io::read_trajectory(dir + "/poses/02.txt");
+  std::ifstream tf(dir + "/times/02.txt");
+  std::vector<double> times;
+  std::vector<Eigen::Vector3d> w;  // ground truth in W = (x, z, -y) of KITTI's camera frame
+  std::string vo_tum, gt_tum;
+  for (std::size_t k = 0; k < 1500; ++k) {
+    double s;
+    REQUIRE(static_cast<bool>(tf >> s));
+    times.push_back(s);
+    const lie::SE3d T_wc = gt.poses[k].T_cw.inverse();
+    const Eigen::Vector3d c = T_wc.translation();
+    w.emplace_back(c.x(), c.z(), -c.y());
+    const Eigen::Quaterniond q = T_wc.rotation().quaternion();
+    std::ostringstream v, g;
+    v << std::fixed << std::setprecision(6) << s << std::setprecision(9) << ' ' << 0.1 * c.x()
+      << ' ' << 0.1 * c.y() << ' ' << 0.1 * c.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z()
+      << ' ' << q.w() << "\n";
+    g << std::fixed << std::setprecision(6) << s << std::setprecision(9) << ' ' << w.back().x()
+      << ' ' << w.back().y() << ' ' << w.back().z() << " 0 0 0 1\n";
+    vo_tum += v.str();
+    gt_tum += g.str();
+  }
+  std::ostringstream an;
+  an << std::setprecision(12) << "timestamp,x,y,z,sigma_m\n";
+  for (std::size_t k = 50; k < 1500; k += 50) {
+    const Eigen::Vector3d p = correction::detail::centre_at(times, w, times[k] + 0.7);
+    an << times[k] << ',' << p.x() << ',' << p.y() << ',' << p.z() << ",0.3\n";
+  }
+  const std::string traj = t.write("KeyFrameTrajectory.txt", vo_tum);
+  const std::string gt_path = t.write("gt.txt", gt_tum);
+  const std::string anchors = t.write("anchors.csv", an.str());
+  const std::string base = "correct --origin 49.0,8.4,100 --trajectory " + traj + " --anchors " +
+                           anchors + " --no-uncertainty --out ";
+  const auto error_2d = [&](const std::string& out) {
+    const Run e = run("eval --result " + t.file(out + "/trajectory_tum.txt") + " --ground-truth " +
+                      gt_path + " --json");
+    REQUIRE(e.code == 0);
+    return mean_2d(e.output);
+  };
+  const Run plain = run(base + t.file("plain"));
+  INFO(plain.output);
+  REQUIRE(plain.code == 0);
+  CHECK(plain.output.find("warning: " + anchors + ": the anchors fit the path best with +0.7") !=
+        std::string::npos);
+  CHECK(plain.output.find("--anchor-time-offset 0.70") != std::string::npos);
+  const std::string report = geodrift::test::read_text(t.file("plain/report.json"));
+  const std::string clock = report.substr(report.find("\"anchor_time_offset\""));
+  CHECK(json_numbers(clock, "applied")[0] == 0.0);
+  CHECK(json_numbers(clock, "estimate")[0] == Approx(0.7).margin(0.05));
+  CHECK(json_numbers(clock, "sd")[0] < 0.05);
+  CHECK(clock.find("\"significant\": true") < clock.find('}'));
+
+  const Run given = run(base + t.file("given") + " --anchor-time-offset 0.7");
+  const Run autom = run(base + t.file("auto") + " --anchor-time-offset auto");
+  INFO(given.output << autom.output);
+  REQUIRE(given.code == 0);
+  REQUIRE(autom.code == 0);
+  CHECK(given.output.find("warning") == std::string::npos);  // nothing left to warn about
+  CHECK(autom.output.find("applied (--anchor-time-offset auto)") != std::string::npos);
+  const std::string ra = geodrift::test::read_text(t.file("auto/report.json"));
+  const std::string ca = ra.substr(ra.find("\"anchor_time_offset\""));
+  CHECK(json_numbers(ca, "applied")[0] == Approx(0.7).margin(0.05));
+  const double e_plain = error_2d("plain"), e_given = error_2d("given"), e_auto = error_2d("auto");
+  INFO("mean 2D error: offset ignored " << e_plain << " m, given " << e_given << " m, auto "
+                                        << e_auto << " m");
+  CHECK(e_given < 0.5 * e_plain);
+  CHECK(e_auto < 0.5 * e_plain);
+  CHECK(std::abs(e_auto - e_given) < 0.1);
+}
+
+TEST_CASE("correct refuses a bad --anchor-time-offset with a message and no output",
+          "[cli][time_offset]") {
+  geodrift::test::TempDir t;
+  const std::string traj = t.write("traj.txt", trajectory_text());
+  const std::string by_frame = t.write("frames.csv", anchors_text({0, 10, 20, 30, 39}));
+  const std::string base =
+      "correct --origin 49.0,8.4,100 --trajectory " + traj + " --anchors " + by_frame;
+  // Not a number.
+  const Run bad = run(base + " --anchor-time-offset soon --out " + t.file("bad"));
+  CHECK(bad.code != 0);
+  CHECK(bad.output.find("--anchor-time-offset") != std::string::npos);
+  CHECK_FALSE(fs::exists(t.file("bad")));
+  // An offset for anchors that are all placed by their frame.
+  const Run nf = run(base + " --anchor-time-offset 0.5 --out " + t.file("nf"));
+  CHECK(nf.code != 0);
+  CHECK(nf.output.find("no anchor of " + by_frame + " is placed by its timestamp") !=
+        std::string::npos);
+  CHECK_FALSE(fs::exists(t.file("nf")));
 }

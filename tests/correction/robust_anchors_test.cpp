@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <fstream>
 #include <random>
 #include <sstream>
 #include <string>
@@ -11,7 +12,9 @@
 
 #include "geodrift/correction/replay.hpp"
 #include "geodrift/correction/screening.hpp"
+#include "geodrift/correction/time_offset.hpp"
 #include "geodrift/eval/errors.hpp"
+#include "geodrift/io/trajectory.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
 #include "support/kitti_sim.hpp"
@@ -381,4 +384,122 @@ TEST_CASE("Geo-tags seen from several keyframes: a wrong one leaves with all its
       INFO("localization " << j << ": " << sc.anchors[j].why);
       CHECK(sc.anchors[j].why.find("geo-tag") != std::string::npos);
     }
+}
+
+namespace {
+
+/// KITTI 02 (4661 poses, 483 s, shipped in data/kitti) as a drifting monocular VO would see it:
+/// the ground-truth steps turned by a heading random walk (5e-5 rad per step) and scaled by a
+/// log-scale random walk (5e-4 per step), in map units of `unit` per metre; and anchors every
+/// 50 frames at the ground-truth centre `offset` seconds after the frame's time (so the
+/// trajectory's time = anchor time + offset), 0.3 m noise per axis.
+struct ClockScene {
+  std::vector<double> times, anchor_times;
+  std::vector<Eigen::Vector3d> vo, anchors;
+};
+ClockScene clock_scene(double offset, double unit, unsigned seed) {
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const io::Trajectory gt = io::read_trajectory(dir + "/poses/02.txt");
+  std::ifstream tf(dir + "/times/02.txt");
+  ClockScene sc;
+  std::vector<Eigen::Vector3d> c;
+  for (const io::TrajectoryPose& p : gt.poses) {
+    double t;
+    REQUIRE(static_cast<bool>(tf >> t));
+    sc.times.push_back(t);
+    c.push_back(p.T_cw.inverse().translation());
+  }
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  double yaw = 0.0, log_scale = 0.0;
+  sc.vo.push_back(Eigen::Vector3d::Zero());
+  for (std::size_t k = 1; k < c.size(); ++k) {
+    yaw += 5e-5 * n01(rng);
+    log_scale += 5e-4 * n01(rng);
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    sc.vo.push_back(sc.vo.back() + unit * std::exp(log_scale) * (R * (c[k] - c[k - 1])));
+  }
+  for (std::size_t k = 50; k + 50 < c.size(); k += 50) {
+    sc.anchor_times.push_back(sc.times[k]);
+    const Eigen::Vector3d noise(n01(rng), n01(rng), n01(rng));
+    sc.anchors.push_back(correction::detail::centre_at(sc.times, c, sc.times[k] + offset) +
+                         0.3 * noise);
+  }
+  return sc;
+}
+
+correction::TimeOffsetEstimate estimate(const ClockScene& sc, double max_offset = 0.0) {
+  return correction::estimate_anchor_time_offset(sc.times, sc.vo, sc.anchor_times, sc.anchors,
+                                                 max_offset);
+}
+
+}  // namespace
+
+TEST_CASE("The anchors' clock offset is found from the path's turns, in any map unit",
+          "[correction][time_offset]") {
+  for (const double offset : {0.7, -0.3, -18.0}) {  // a logging latency; GPS time against UTC
+    const ClockScene sc = clock_scene(offset, 1.0, 3);
+    const correction::TimeOffsetEstimate e = estimate(sc);
+    INFO("true " << offset << " s: estimate " << e.offset << " ± " << e.sd << " s, statistic "
+                 << e.statistic << ", windowed RMS " << e.rms_at_zero << " -> " << e.rms_at_estimate
+                 << " m over " << e.windows << " windows");
+    REQUIRE(e.estimated);
+    CHECK(e.searched == Approx(20.0));
+    CHECK(std::abs(e.offset - offset) < 0.05);
+    CHECK(std::abs(e.offset - offset) < 4.0 * e.sd);
+    CHECK(e.sd < 0.05);
+    CHECK(e.significant);
+    CHECK_FALSE(e.at_edge);
+    CHECK(e.rms_at_estimate < 0.5 * e.rms_at_zero);
+    // The map's unit does not matter: one similarity per window.
+    const correction::TimeOffsetEstimate m = estimate(clock_scene(offset, 1e-3, 3));
+    CHECK(std::abs(m.offset - e.offset) < 1e-6);
+    CHECK(m.statistic == Approx(e.statistic).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("No clock offset is reported where there is none or where it cannot be seen",
+          "[correction][time_offset]") {
+  for (unsigned seed : {3u, 4u, 5u}) {  // the same clock: estimate near 0, not significant
+    const correction::TimeOffsetEstimate e = estimate(clock_scene(0.0, 1.0, seed));
+    INFO("seed " << seed << ": estimate " << e.offset << " ± " << e.sd << " s, statistic "
+                 << e.statistic);
+    REQUIRE(e.estimated);
+    CHECK(std::abs(e.offset) < 0.05);
+    CHECK_FALSE(e.significant);
+  }
+  // Just outside the searched ±T: the best offset sits at the edge and says so.
+  const correction::TimeOffsetEstimate edge = estimate(clock_scene(0.7, 1.0, 3), 0.5);
+  REQUIRE(edge.estimated);
+  CHECK(edge.offset == Approx(0.5).margin(0.01));
+  CHECK(edge.at_edge);
+  CHECK_FALSE(estimate(clock_scene(0.7, 1.0, 3), 1.0).at_edge);
+  // A straight road at constant speed: an offset is a shift along it, not observable.
+  ClockScene line;
+  for (int k = 0; k < 600; ++k) {
+    line.times.push_back(0.1 * k);
+    line.vo.push_back(Eigen::Vector3d(0.0, 0.0, 0.5 * k));
+  }
+  for (int k = 50; k < 550; k += 25) {
+    line.anchor_times.push_back(0.1 * k);
+    line.anchors.push_back(Eigen::Vector3d(10.0 * (0.1 * k + 0.7), 0.0, 0.0));
+  }
+  const correction::TimeOffsetEstimate s = estimate(line);
+  CHECK_FALSE(s.estimated);
+  CHECK(s.reason.find("straight") != std::string::npos);
+  // Too few anchors: 9, two windows of 5 are needed.
+  ClockScene few = clock_scene(0.7, 1.0, 3);
+  few.anchor_times.resize(9);
+  few.anchors.resize(9);
+  const correction::TimeOffsetEstimate f = estimate(few);
+  CHECK_FALSE(f.estimated);
+  CHECK(f.reason.find("10 are needed") != std::string::npos);
+  // Timestamps that do not increase, non-finite input.
+  ClockScene back = clock_scene(0.7, 1.0, 3);
+  back.times[100] = back.times[98];
+  CHECK_FALSE(estimate(back).estimated);
+  CHECK(estimate(back).reason.find("do not increase") != std::string::npos);
+  back = clock_scene(0.7, 1.0, 3);
+  back.anchors[2].x() = std::nan("");
+  CHECK_THROWS_WITH(estimate(back), Catch::Contains("anchor 2 is not finite"));
 }

@@ -886,8 +886,8 @@ TEST_CASE("Geodesic acceleration right-hand side tends to Jᵀ·r'' as h shrinks
   // h = 0.1 (the default) and 0.01; smaller h would meet the reference's own rounding.
   const double err_1 = relative_difference(library_acceleration(&pa, v, 1e-1), ref);
   const double err_2 = relative_difference(library_acceleration(&pa, v, 1e-2), ref);
-  INFO("|ref| " << ref.lpNorm<Eigen::Infinity>() << " error at h = 0.1 " << err_1
-                << ", at 0.01 " << err_2);
+  INFO("|ref| " << ref.lpNorm<Eigen::Infinity>() << " error at h = 0.1 " << err_1 << ", at 0.01 "
+                << err_2);
   CHECK(ref.lpNorm<Eigen::Infinity>() > 1e-3);
   CHECK(err_1 < 1e-2);
   CHECK(err_2 < 1e-3);
