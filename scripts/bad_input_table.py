@@ -30,8 +30,9 @@ def statement(lines, i):
     text, depth, j = "", 0, i
     while j < len(lines):
         text += lines[j].strip() + " "
-        depth += lines[j].count("(") - lines[j].count(")")
-        if depth <= 0 and ";" in lines[j]:
+        code = STRING.sub('""', lines[j])  # a parenthesis inside a string literal is text
+        depth += code.count("(") - code.count(")")
+        if depth <= 0 and ";" in code:
             break
         j += 1
     return text, j
