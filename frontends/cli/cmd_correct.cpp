@@ -797,6 +797,7 @@ int run_correct(int argc, char** argv) {
     if (clock.estimated)
       j << ", \"estimate\": " << json_num(clock_total) << ", \"sd\": " << json_num(clock.sd)
         << ", \"searched\": " << json_num(clock.searched) << ", \"windows\": " << clock.windows
+        << ", \"windows_left_out\": " << clock.windows_left_out
         << ", \"anchors\": " << clock.anchors
         << ", \"rms_at_zero\": " << json_num(clock.rms_at_zero)
         << ", \"rms_at_estimate\": " << json_num(clock.rms_at_estimate)

@@ -392,12 +392,13 @@ namespace {
 /// the ground-truth steps turned by a heading random walk (5e-5 rad per step) and scaled by a
 /// log-scale random walk (5e-4 per step), in map units of `unit` per metre; and anchors every
 /// 50 frames at the ground-truth centre `offset` seconds after the frame's time (so the
-/// trajectory's time = anchor time + offset), 0.3 m noise per axis.
+/// trajectory's time = anchor time + offset), 0.3 m noise per axis; a fraction `wrong` of them
+/// shifted 20–60 m in a random horizontal direction (wrong geo-tags).
 struct ClockScene {
   std::vector<double> times, anchor_times;
   std::vector<Eigen::Vector3d> vo, anchors;
 };
-ClockScene clock_scene(double offset, double unit, unsigned seed) {
+ClockScene clock_scene(double offset, double unit, unsigned seed, double wrong = 0.0) {
   const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
   const io::Trajectory gt = io::read_trajectory(dir + "/poses/02.txt");
   std::ifstream tf(dir + "/times/02.txt");
@@ -424,6 +425,11 @@ ClockScene clock_scene(double offset, double unit, unsigned seed) {
     const Eigen::Vector3d noise(n01(rng), n01(rng), n01(rng));
     sc.anchors.push_back(correction::detail::centre_at(sc.times, c, sc.times[k] + offset) +
                          0.3 * noise);
+    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng) < wrong) {
+      const double a = std::uniform_real_distribution<double>(0.0, 2 * M_PI)(rng);
+      const double d = std::uniform_real_distribution<double>(20.0, 60.0)(rng);
+      sc.anchors.back() += d * Eigen::Vector3d(std::cos(a), 0.0, std::sin(a));  // KITTI: y down
+    }
   }
   return sc;
 }
@@ -455,6 +461,25 @@ TEST_CASE("The anchors' clock offset is found from the path's turns, in any map 
     const correction::TimeOffsetEstimate m = estimate(clock_scene(offset, 1e-3, 3));
     CHECK(std::abs(m.offset - e.offset) < 1e-6);
     CHECK(m.statistic == Approx(e.statistic).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("The clock offset is found among wrong geo-tags, and none is made up by them",
+          "[correction][time_offset]") {
+  // 20 % of the anchors 20–60 m off: each window is fitted without its worst anchor, and a
+  // window with two or more wrong ones is left out.
+  for (unsigned seed : {3u, 4u, 5u}) {
+    const correction::TimeOffsetEstimate e = estimate(clock_scene(0.7, 1.0, seed, 0.2));
+    const correction::TimeOffsetEstimate z = estimate(clock_scene(0.0, 1.0, seed, 0.2));
+    INFO("seed " << seed << ": 0.7 s estimated " << e.offset << " ± " << e.sd << " s, "
+                 << e.windows_left_out << " windows left out; none: " << z.offset << " ± " << z.sd
+                 << " s, statistic " << z.statistic);
+    REQUIRE(e.estimated);
+    CHECK(e.windows_left_out > 0);
+    CHECK(std::abs(e.offset - 0.7) < 0.05);
+    CHECK(e.significant);
+    REQUIRE(z.estimated);
+    CHECK_FALSE(z.significant);
   }
 }
 

@@ -13,12 +13,14 @@
 /// window the VO path differs from the true one by a similarity (its drift over a few hundred
 /// metres is small against a turn); F(τ) is the sum over windows of the squared residuals of the
 /// best 3D similarity (Umeyama) from the VO camera centres at t_a + τ (linear in time between
-/// poses) to the anchors. τ̂ minimises F over ±T (a grid of step T/100, then a golden-section
-/// refinement); the residual variance s² = F(τ̂)/dof holds the drift inside the windows and the
-/// anchors' noise alike; the test statistic (F(0) − F(τ̂))/s² is a likelihood ratio for τ = 0
-/// (one parameter), and sd(τ̂) = √(2·s²/F''(τ̂)). Windows whose VO centres are collinear at some
-/// τ of the grid (a straight road: the fit's rotation about it is free) are left out; a path
-/// with none left has no observable offset.
+/// poses) to the anchors, each window fitted without the one anchor whose leaving out fits best
+/// (a wrong geo-tag in the window); a window whose best fit over all τ stays above 3× the median
+/// window's RMS (two or more wrong anchors) is left out. τ̂ minimises F over ±T (a grid of step
+/// T/100, then a golden-section refinement); the residual variance s² = F(τ̂)/dof holds the drift
+/// inside the windows and the anchors' noise alike; the test statistic (F(0) − F(τ̂))/s² is a
+/// likelihood ratio for τ = 0 (one parameter), and sd(τ̂) = √(2·s²/F''(τ̂)). Windows whose VO centres
+/// are collinear at some τ of the grid (a straight road: the fit's rotation about it is free) are
+/// left out; a path with none left has no observable offset.
 ///
 /// Frames: VO camera centres in the trajectory's own frame and unit (any; a similarity per
 /// window removes both), anchor positions in W [m].
@@ -51,8 +53,10 @@ struct TimeOffsetEstimate {
   double offset = 0.0;  ///< τ̂ [s]: trajectory time = anchor time + τ̂ fits best
   double sd = std::numeric_limits<double>::infinity();  ///< of τ̂ [s]
   double searched = 0.0;                                ///< T: τ was searched in [−T, T] [s]
-  int anchors = 0;                                      ///< anchors in the windows
+  int anchors = 0;  ///< anchors in the windows' fits (4 of each window's 5)
   int windows = 0;
+  /// Windows left out because even their best fit is far off (two or more wrong anchors).
+  int windows_left_out = 0;
   double rms_at_zero = std::numeric_limits<double>::quiet_NaN();  ///< √(F(0)/(3·anchors)) [m]
   double rms_at_estimate = std::numeric_limits<double>::quiet_NaN();  ///< √(F(τ̂)/(3·anchors))
   double statistic = 0.0;                                             ///< (F(0) − F(τ̂))/s²
@@ -130,18 +134,29 @@ inline TimeOffsetEstimate estimate_anchor_time_offset(
   for (std::size_t k = 0; k + w <= order.size(); k += w)
     windows.emplace_back(order.begin() + static_cast<std::ptrdiff_t>(k),
                          order.begin() + static_cast<std::ptrdiff_t>(k + w));
-  // Per window at offset tau: the residual sum of squares, or NaN if its centres are collinear.
+  // Per window at offset tau: the residual sum of squares of the best fit that leaves one anchor
+  // out (a wrong anchor in the window is that one), or NaN if the centres are collinear.
   const auto window_ssr = [&](const std::vector<std::size_t>& win, double tau) {
+    std::vector<Eigen::Vector3d> src_all;
+    for (std::size_t i : win)
+      src_all.push_back(detail::centre_at(pose_times, centres, anchor_times[i] + tau));
+    double best = std::numeric_limits<double>::quiet_NaN();
     std::vector<Eigen::Vector3d> src, dst;
-    for (std::size_t i : win) {
-      src.push_back(detail::centre_at(pose_times, centres, anchor_times[i] + tau));
-      dst.push_back(anchor_positions[i]);
+    for (std::size_t out_k = 0; out_k < win.size(); ++out_k) {
+      src.clear();
+      dst.clear();
+      for (std::size_t k = 0; k < win.size(); ++k) {
+        if (k == out_k) continue;
+        src.push_back(src_all[k]);
+        dst.push_back(anchor_positions[win[k]]);
+      }
+      const eval::Alignment a = eval::umeyama(src, dst, true);
+      if (!a.ok()) return std::numeric_limits<double>::quiet_NaN();
+      double ssr = 0.0;
+      for (std::size_t k = 0; k < src.size(); ++k) ssr += (dst[k] - a.apply(src[k])).squaredNorm();
+      if (!(ssr >= best)) best = ssr;  // also replaces the initial NaN
     }
-    const eval::Alignment a = eval::umeyama(src, dst, true);
-    if (!a.ok()) return std::numeric_limits<double>::quiet_NaN();
-    double s = 0.0;
-    for (std::size_t k = 0; k < src.size(); ++k) s += (dst[k] - a.apply(src[k])).squaredNorm();
-    return s;
+    return best;
   };
   constexpr int kGrid = 100;  // grid points on each side of 0
   const double step = T / kGrid;
@@ -152,11 +167,32 @@ inline TimeOffsetEstimate estimate_anchor_time_offset(
       grid[k][static_cast<std::size_t>(g + kGrid)] = window_ssr(windows[k], g * step);
       keep[k] = std::isfinite(grid[k][static_cast<std::size_t>(g + kGrid)]);
     }
+  // A window whose best fit over every offset stays far above the others' holds two or more
+  // wrong anchors: left out (RMS above 3× the median window's, and above 1 mm).
+  {
+    std::vector<double> best_ssr(windows.size(), 0.0), kept_best;
+    for (std::size_t k = 0; k < windows.size(); ++k)
+      if (keep[k]) {
+        best_ssr[k] = *std::min_element(grid[k].begin(), grid[k].end());
+        kept_best.push_back(best_ssr[k]);
+      }
+    if (!kept_best.empty()) {
+      std::nth_element(kept_best.begin(),
+                       kept_best.begin() + static_cast<std::ptrdiff_t>(kept_best.size() / 2),
+                       kept_best.end());
+      const double limit = std::max(9.0 * kept_best[kept_best.size() / 2], 1e-6 * 3 * (w - 1));
+      for (std::size_t k = 0; k < windows.size(); ++k)
+        if (keep[k] && best_ssr[k] > limit) {
+          keep[k] = false;
+          ++out.windows_left_out;
+        }
+    }
+  }
   std::vector<std::vector<std::size_t>> used;
   for (std::size_t k = 0; k < windows.size(); ++k)
     if (keep[k]) used.push_back(windows[k]);
   out.windows = static_cast<int>(used.size());
-  out.anchors = static_cast<int>(used.size() * w);
+  out.anchors = static_cast<int>(used.size() * (w - 1));
   if (used.size() < 2) {
     out.reason = std::to_string(used.size()) + " of " + std::to_string(windows.size()) +
                  " windows of " + std::to_string(w) +
@@ -197,7 +233,7 @@ inline TimeOffsetEstimate estimate_anchor_time_offset(
   double tau = 0.5 * (a + b), f_tau = F(tau);
   if (f_best < f_tau) tau = best * step, f_tau = f_best;  // the grid point, if the cell was flat
   const double f0 = F(0.0);
-  const double dof = static_cast<double>(used.size() * (3 * w - 7)) - 1.0;
+  const double dof = static_cast<double>(used.size() * (3 * (w - 1) - 7)) - 1.0;
   const double s2 = std::max(f_tau / dof, 1e-12 * (f0 / dof + 1e-300));
   const double delta = 0.25 * step;
   const double f2 = (F(tau + delta) - 2.0 * f_tau + F(tau - delta)) / (delta * delta);
