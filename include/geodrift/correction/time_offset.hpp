@@ -37,7 +37,8 @@
 
 namespace geodrift::correction {
 
-/// Anchors per window: a 3D similarity has 7 degrees of freedom, 5 anchors leave 8 residuals.
+/// Anchors per window: the best-fitting 4 of them enter the fit, whose 12 coordinates leave 5
+/// residual degrees of freedom to a 3D similarity's 7.
 inline constexpr int kTimeOffsetWindow = 5;
 /// The likelihood-ratio statistic above which the offset is reported: 25, a 5σ departure (the
 /// windows' residuals are not white, the drift inside them is correlated, so the nominal 1e-6
