@@ -412,8 +412,8 @@ int run_correct(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "geodrift correct: warning: %s: the anchors' clock and the trajectory's may "
-                   "differ; check them, or pass --anchor-time-offset %.3f (or auto)\n",
-                   buf, clock_total);
+                   "differ; check them, or pass --anchor-time-offset %.3f%s\n",
+                   buf, clock_total, clock.at_edge ? "" : " (or auto)");  // auto stops at the edge
     }
   }
   std::vector<io::AnchorLocation> locs = io::locate_anchors(anchors, traj, anchors_path);
