@@ -637,6 +637,70 @@ TEST_CASE("Anchors are located on the trajectory by frame or by time", "[io][anc
                                       "anchors.csv", 3, "no timestamps");
 }
 
+TEST_CASE("Anchors in another clock than the trajectory's are named: unit or GPS epoch",
+          "[io][anchors]") {
+  // 100 poses over 99 s, in a given unit and epoch; four anchors at 10, 40, 70 and 95 s.
+  const auto trajectory = [](double scale, double epoch) {
+    io::Trajectory t;
+    t.has_timestamps = true;
+    for (int i = 0; i < 100; ++i) {
+      io::TrajectoryPose p;
+      p.frame = i;
+      p.timestamp = epoch + scale * i;
+      t.poses.push_back(p);
+    }
+    return t;
+  };
+  const auto anchors = [](double scale, double epoch) {
+    std::vector<io::Anchor> a(4);
+    const double at[4] = {10, 40, 70, 95};
+    for (int i = 0; i < 4; ++i) {
+      a[i].timestamp = epoch + scale * at[i];
+      a[i].line = 2 + i;
+    }
+    return a;
+  };
+  // Same clock: located, no complaint.
+  const std::vector<io::AnchorLocation> ok =
+      io::locate_anchors(anchors(1, 1.6e9), trajectory(1, 1.6e9), "a.csv");
+  CHECK(ok[1].index == 40);
+  // Seconds against a trajectory in nanoseconds: inside its range, bunched at its start.
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1, 0), trajectory(1e9, 0), "a.csv"); }, "a.csv", 2,
+      "look like seconds and the trajectory's like nanoseconds");
+  // Nanoseconds against seconds, milliseconds against seconds: outside, with the unit named.
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1e9, 1.6e18), trajectory(1, 1.6e9), "a.csv"); }, "a.csv", 2,
+      "look like nanoseconds and the trajectory's like seconds");
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1e3, 1.6e12), trajectory(1, 1.6e9), "a.csv"); }, "a.csv", 2,
+      "look like milliseconds");
+  // GPS time (18 leap seconds) against Unix time, both ways, with the offset to pass.
+  const double gps = 1.6e9 - 315964782.0;
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1, gps), trajectory(1, 1.6e9), "a.csv"); }, "a.csv", 2,
+      "less 18 leap seconds: one is GPS time, the other Unix (UTC) time (--anchor-time-offset "
+      "315964782)");
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1, 1.6e9), trajectory(1, gps), "a.csv"); }, "a.csv", 2,
+      "(--anchor-time-offset -315964782)");
+  // Seconds of the GPS week against an absolute time.
+  geodrift::test::require_parse_error(
+      [&] { io::locate_anchors(anchors(1, 3e5), trajectory(1, 1.6e9), "a.csv"); }, "a.csv", 2,
+      "seconds of the GPS week");
+  // Simply outside, no unit fits: the plain message.
+  std::vector<io::Anchor> far = anchors(1, 2e9);
+  try {
+    io::locate_anchors(far, trajectory(1, 1.6e9), "a.csv");
+    FAIL("no error");
+  } catch (const geodrift::InvalidArgument& e) {
+    const std::string msg = e.what();
+    CHECK(msg.find("is outside the trajectory's timestamp range") != std::string::npos);
+    CHECK(msg.find("look like") == std::string::npos);
+    CHECK(msg.find("GPS") == std::string::npos);
+  }
+}
+
 TEST_CASE("The shipped KITTI ground truth reads as 4661 poses, with and without times",
           "[io][trajectory][data]") {
   const std::string dir = std::string(GEODRIFT_DATA_DIR) + "/kitti_odometry_gt";

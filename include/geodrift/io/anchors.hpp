@@ -287,6 +287,60 @@ inline std::vector<Anchor> read_anchors(const std::string& path, const geo::Loca
   return anchors_in_world(read_anchors_csv(path), frame);
 }
 
+namespace detail {
+
+/// GPS time (from 1980-01-06) runs 315,964,800 s behind Unix time (from 1970-01-01) less the
+/// leap seconds since 1980: 18 since 2017, 10–17 from 1996 on.
+constexpr double kGpsEpochUnixSeconds = 315964800.0;
+
+/// Why the anchors' timestamps `a` (ascending) may not be in the trajectory's clock
+/// [t0, t1]: a unit factor (seconds against milli-, micro- or nanoseconds) or the GPS/Unix
+/// epochs that put every one of them inside the trajectory's range, said in words; empty when
+/// none does. A hint only: nothing is converted.
+inline std::string time_unit_hint(const std::vector<double>& a, double t0, double t1) {
+  if (a.empty() || !(t1 > t0)) return {};
+  const double span = t1 - t0;
+  const auto inside = [&](double scale, double shift) {
+    const double lo = a.front() * scale + shift, hi = a.back() * scale + shift;
+    return lo >= t0 - 1e-3 * span && hi <= t1 + 1e-3 * span;
+  };
+  static const struct {
+    double factor;
+    const char* anchors;
+    const char* trajectory;
+  } kUnits[] = {{1e9, "seconds", "nanoseconds"},   {1e6, "seconds", "microseconds"},
+                {1e3, "seconds", "milliseconds"},  {1e-3, "milliseconds", "seconds"},
+                {1e-6, "microseconds", "seconds"}, {1e-9, "nanoseconds", "seconds"}};
+  std::ostringstream os;
+  os << std::setprecision(6);
+  for (const auto& u : kUnits)
+    if (inside(u.factor, 0.0)) {
+      os << "the anchors' timestamps look like " << u.anchors << " and the trajectory's like "
+         << u.trajectory << " (x" << u.factor
+         << " puts every anchor inside the trajectory's range): give both in seconds";
+      return os.str();
+    }
+  // Today's 18 leap seconds first: a range fits a few seconds either way, and the clock check
+  // of the correction (correction/time_offset.hpp) finds the rest.
+  for (int i = 0; i <= 20; ++i) {
+    const int leap = i <= 18 ? 18 - i : i;
+    const double d = kGpsEpochUnixSeconds - leap;
+    if (inside(1.0, d) || inside(1.0, -d)) {
+      os << std::setprecision(10) << "the anchors' and the trajectory's timestamps differ by " << d
+         << " s, the GPS epoch against Unix time less " << leap
+         << " leap seconds: one is GPS time, the other Unix (UTC) time (--anchor-time-offset "
+         << (inside(1.0, d) ? d : -d) << ")";
+      return os.str();
+    }
+  }
+  if (a.front() >= 0 && a.back() <= 604800.0 && t0 > 1e8)
+    return "the anchors' timestamps look like seconds of the GPS week and the trajectory's like "
+           "an absolute time: give the anchors as GPS or Unix time";
+  return {};
+}
+
+}  // namespace detail
+
 /// Where an anchor falls on a trajectory: at pose `index` + `fraction` of the way to pose
 /// `index + 1` (fraction in [0, 1); the last pose is index n-1 with fraction 0).
 struct AnchorLocation {
@@ -301,7 +355,10 @@ struct AnchorLocation {
 /// @param anchors_path the anchors file, for messages.
 /// @throws InvalidArgument "<anchors_path>:<line>: <what>" for an anchor outside the
 ///         trajectory's frame or time range, or with only a timestamp when the trajectory has
-///         none.
+///         none, or anchors' timestamps bunched into a thousandth of the trajectory's time
+///         range when another unit would spread them over it (seconds against nanoseconds);
+///         a timestamp out of range says which unit or epoch would fit
+///         (detail::time_unit_hint).
 inline std::vector<AnchorLocation> locate_anchors(const std::vector<Anchor>& anchors,
                                                   const Trajectory& traj,
                                                   const std::string& anchors_path) {
@@ -311,6 +368,18 @@ inline std::vector<AnchorLocation> locate_anchors(const std::vector<Anchor>& anc
     frames.push_back(p.frame);
     times.push_back(p.timestamp);
   }
+  // The timestamps of the anchors placed by one, for a hint when they are in another clock.
+  std::vector<double> anchor_times;
+  const Anchor* first_timed = nullptr;
+  for (const Anchor& a : anchors)
+    if (a.frame < 0 && std::isfinite(a.timestamp)) {
+      anchor_times.push_back(a.timestamp);
+      if (!first_timed) first_timed = &a;
+    }
+  std::sort(anchor_times.begin(), anchor_times.end());
+  const std::string time_hint =
+      traj.has_timestamps ? detail::time_unit_hint(anchor_times, times.front(), times.back())
+                          : std::string();
   const auto locate = [&](const std::vector<double>& keys, double v, const Anchor& a,
                           const char* what) {
     if (!(v >= keys.front() && v <= keys.back())) {
@@ -318,6 +387,7 @@ inline std::vector<AnchorLocation> locate_anchors(const std::vector<Anchor>& anc
       os << std::setprecision(15) << "anchor " << what << " " << v
          << " is outside the trajectory's " << what << " range [" << keys.front() << ", "
          << keys.back() << "]";
+      if (&keys == &times && !time_hint.empty()) os << ": " << time_hint;
       detail::parse_error(anchors_path, a.line, os.str());
     }
     AnchorLocation loc;
@@ -342,6 +412,17 @@ inline std::vector<AnchorLocation> locate_anchors(const std::vector<Anchor>& anc
                             "timestamps (KITTI): give a 'frame' column");
       out.push_back(locate(times, a.timestamp, a, "timestamp"));
     }
+  }
+  // Inside the range but bunched into a sliver of it, as seconds read against nanoseconds
+  // are: every such anchor would land on the first poses.
+  if (anchor_times.size() >= 2 && !time_hint.empty() &&
+      anchor_times.back() - anchor_times.front() < 1e-3 * (times.back() - times.front())) {
+    std::ostringstream os;
+    os << std::setprecision(6) << "the anchors' timestamps span "
+       << anchor_times.back() - anchor_times.front() << ", a fraction "
+       << (anchor_times.back() - anchor_times.front()) / (times.back() - times.front())
+       << " of the trajectory's " << times.back() - times.front() << ": " << time_hint;
+    detail::parse_error(anchors_path, first_timed->line, os.str());
   }
   return out;
 }
