@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <filesystem>
 #include <geodrift/error.hpp>
@@ -119,6 +120,23 @@ inline std::vector<double> parse_number_list(const std::string& option, const st
 
 /// True when stderr is a terminal (progress is shown only then).
 inline bool stderr_is_tty() { return ::isatty(::fileno(stderr)) != 0; }
+
+/// printf-style formatting into a string (messages with numbers in them).
+#if defined(__GNUC__)
+__attribute__((format(printf, 1, 2)))
+#endif
+inline std::string
+strprintf(const char* format, ...) {
+  va_list args, again;
+  va_start(args, format);
+  va_copy(again, args);
+  const int n = std::vsnprintf(nullptr, 0, format, args);
+  va_end(args);
+  std::string out(n > 0 ? static_cast<std::size_t>(n) : 0, '\0');
+  if (n > 0) std::vsnprintf(out.data(), out.size() + 1, format, again);
+  va_end(again);
+  return out;
+}
 
 /// The command line as one string (for report.json).
 inline std::string command_line(int argc, char** argv) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <geodrift/correction/corrector.hpp>
+#include <geodrift/correction/input_checks.hpp>
 #include <geodrift/correction/local_scale.hpp>
 #include <geodrift/correction/replay.hpp>
 #include <geodrift/correction/screening.hpp>
@@ -119,6 +120,10 @@ options
                       refused by default, as a pose graph across it bends the whole path);
                       each jump is then named on stderr and in report.json (as is, always,
                       a suspect step: faster than 4x)
+  --allow-upside-down correct a path whose corrected cameras come out upside down although it
+                      moves forwards along their +z axis: refused by default, as that is what
+                      anchors mirrored against the path give (latitude/longitude, easting/
+                      northing or x/y swapped); pass it for a camera mounted upside down
   --anchor-time-offset S
                       seconds to add to the anchors' timestamps to get the trajectory's clock
                       (anchors placed by a timestamp only; a 'frame' column is exact), or auto:
@@ -229,7 +234,8 @@ int run_correct(int argc, char** argv) {
       {"trajectory", "format", "times", "map", "anchors", "mode", "origin", "keyframe-step",
        "links", "weights", "local-scale", "first-window", "min-window-keyframes", "ba-min-parallax",
        "ba-cost-tolerance-sd", "anchor-time-offset", "out"},
-      {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty", "allow-jumps"});
+      {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty", "allow-jumps",
+       "allow-upside-down"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -290,8 +296,9 @@ int run_correct(int argc, char** argv) {
   double time_offset = 0.0;  // applied to the anchors placed by timestamp
   if (args.has("anchor-time-offset") && !time_offset_auto) {
     time_offset = number_option(args, "anchor-time-offset", 0.0);
-    if (!(std::abs(time_offset) <= 1e6))
-      throw UsageError("--anchor-time-offset takes auto or seconds in [-1e6, 1e6], not " +
+    // Up to 1e10 s: GPS time against Unix time is 315,964,782 s apart.
+    if (!(std::abs(time_offset) <= 1e10))
+      throw UsageError("--anchor-time-offset takes auto or seconds in [-1e10, 1e10], not " +
                        args.get("anchor-time-offset"));
   }
   {
@@ -601,6 +608,19 @@ int run_correct(int argc, char** argv) {
                 " after INIT were rejected as inconsistent with the path INIT's anchors give "
                 "(wrong INIT anchors, a broken trajectory, or anchors of another place): no "
                 "trustworthy result, nothing written");
+  {  // anchors mirrored against the path turn it over (correction/input_checks.hpp)
+    std::vector<lie::SE3d> T_cw(nk);
+    for (std::size_t i = 0; i < nk; ++i) T_cw[i] = corrector.keyframe_pose_w(static_cast<int>(i));
+    const correction::CameraAttitude att = correction::camera_attitude(T_cw);
+    if (att.turned_over() && !args.flag("allow-upside-down"))
+      throw Error(strprintf(
+          "the anchors of %s fit the path only turned over: the corrected cameras are upside "
+          "down at %d of %d keyframes while they move forwards. The anchors are a mirror image "
+          "of the path: latitude and longitude swapped (GeoJSON's order is longitude, "
+          "latitude), or easting and northing, or x and y. No trustworthy result, nothing "
+          "written (--allow-upside-down if the camera is mounted upside down)",
+          anchors_path.c_str(), att.upside_down, att.keyframes));
+  }
   if (corrector.rejected_window_updates() > 0)
     std::fprintf(stderr,
                  "geodrift correct: warning: %d pose-graph window(s) diverged and were not "
@@ -618,6 +638,35 @@ int run_correct(int argc, char** argv) {
       std::fprintf(stderr, "geodrift correct: uncertainty: %s\n", unc.message.c_str());
   } else {
     unc.message = "skipped (--no-uncertainty)";
+  }
+  // How much more the correction stretched the path in one place than in another.
+  double scale_spread = NAN;
+  {
+    std::vector<double> scales(nk);
+    for (std::size_t i = 0; i < nk; ++i)
+      scales[i] = corrector.keyframe_sim3(static_cast<int>(i)).scale();
+    scale_spread = correction::scale_spread(scales);
+  }
+  if (screen) {  // a path and anchors that do not belong together (correction/input_checks.hpp)
+    // The screening's drift factor; where it could not run, the uncertainty's (estimated from
+    // the anchors' prediction by the others, as the screening's is).
+    const double k = screening.ok ? screening.drift_factor
+                     : unc.ok && unc.predicted_anchors >=
+                                     correction::PathUncertaintyOptions{}.min_predicted_anchors
+                         ? unc.drift_factor
+                         : NAN;
+    if (correction::implausible_drift(k, scale_spread))
+      throw Error(strprintf(
+          "the path of %s does not have the anchors' shape: between the anchors of %s it would "
+          "have to drift %.0fx more (SD) than a monocular VO does (drift variance factor %.3g > "
+          "%g), and the correction stretched it by %.3gx more in one place than in another "
+          "(> %g). World-to-camera poses where camera-to-world are expected (TUM and KITTI "
+          "files hold T_wc), anchors of another run or place, poses out of order, or anchors "
+          "far worse than their sigma_m: no trustworthy result, nothing written "
+          "(--no-screen-anchors skips this check)",
+          traj_path.c_str(), anchors_path.c_str(), std::sqrt(k), k,
+          correction::kMaxPlausibleDriftFactor, scale_spread,
+          correction::kMaxPlausibleScaleSpread));
   }
   std::size_t last_anchor_index = 0;
   for (std::size_t j = 0; j < anchors.size(); ++j)
@@ -815,6 +864,7 @@ int run_correct(int argc, char** argv) {
       << ",\n  \"anchor_residuals_m\": " << residuals
       << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor())
       << ",\n  \"rejected_window_updates\": " << corrector.rejected_window_updates()
+      << ",\n  \"scale_spread\": " << json_num(scale_spread)
       << ",\n  \"screening\": {\"enabled\": " << (screen ? "true" : "false")
       << ", \"ok\": " << (screening.ok ? "true" : "false")
       << ", \"message\": " << io::detail::json_string(screening.message)

@@ -837,3 +837,121 @@ TEST_CASE("correct refuses a bad --anchor-time-offset with a message and no outp
         std::string::npos);
   CHECK_FALSE(fs::exists(t.file("nf")));
 }
+
+TEST_CASE("correct refuses files that do not belong together: clock, mirror, T_cw",
+          "[cli][input_checks]") {
+  // 150 s of KITTI 02 as a TUM trajectory in M (the ground truth at a tenth of its unit) and
+  // anchors every 10 s from the ground truth in W = (x, z, -y) of KITTI's camera frame. Each
+  // file parses and every anchor lies inside the trajectory; only together are they wrong.
+  namespace io = geodrift::io;
+  namespace lie = geodrift::lie;
+  geodrift::test::TempDir t;
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const io::Trajectory gt = io::read_trajectory(dir + "/poses/02.txt");
+  std::ifstream tf(dir + "/times/02.txt");
+  // tum(f): the trajectory with pose T written as f(T_wc) and timestamps times `unit`.
+  std::vector<double> times;
+  for (std::size_t k = 0; k < 1500; ++k) {
+    double s;
+    REQUIRE(static_cast<bool>(tf >> s));
+    times.push_back(s);
+  }
+  const auto tum = [&](double unit, const auto& f) {
+    std::ostringstream os;
+    os << std::setprecision(12);
+    for (std::size_t k = 0; k < times.size(); ++k) {
+      lie::SE3d T_wc = gt.poses[k].T_cw.inverse();
+      T_wc = lie::SE3d(T_wc.rotation(), 0.1 * T_wc.translation());
+      const lie::SE3d T = f(T_wc);
+      const Eigen::Quaterniond q = T.rotation().quaternion();
+      const Eigen::Vector3d c = T.translation();
+      os << unit * times[k] << ' ' << c.x() << ' ' << c.y() << ' ' << c.z() << ' ' << q.x() << ' '
+         << q.y() << ' ' << q.z() << ' ' << q.w() << "\n";
+    }
+    return os.str();
+  };
+  const auto as_is = [](const lie::SE3d& T_wc) { return T_wc; };
+  const auto anchors = [&](bool swap_xy) {
+    std::ostringstream os;
+    os << std::setprecision(12) << "timestamp,x,y,z,sigma_m\n";
+    for (std::size_t k = 50; k < times.size(); k += 100) {
+      const Eigen::Vector3d c = gt.poses[k].T_cw.inverse().translation();
+      const double x = c.x(), y = c.z();
+      os << times[k] << ',' << (swap_xy ? y : x) << ',' << (swap_xy ? x : y) << ',' << -c.y()
+         << ",0.3\n";
+    }
+    return os.str();
+  };
+  const std::string good = t.write("anchors.csv", anchors(false));
+  const std::string traj = t.write("traj.txt", tum(1.0, as_is));
+  const auto correct = [&](const std::string& trajectory, const std::string& anchor_file,
+                           const std::string& out, const std::string& extra = "") {
+    return run("correct --origin 49.0,8.4,100 --trajectory " + trajectory + " --anchors " +
+               anchor_file + " --out " + t.file(out) + extra);
+  };
+  const Run ok = correct(traj, good, "ok");
+  INFO(ok.output);
+  REQUIRE(ok.code == 0);
+
+  // Nanoseconds in the trajectory, seconds in the anchors (ORB-SLAM3's EuRoC-style output):
+  // every anchor would land within the first 0.1 s.
+  const Run ns = correct(t.write("traj_ns.txt", tum(1e9, as_is)), good, "ns");
+  INFO(ns.output);
+  CHECK(ns.code == 1);
+  CHECK(ns.output.find(good + ":2: the anchors' timestamps span") != std::string::npos);
+  CHECK(ns.output.find("look like seconds and the trajectory's like nanoseconds") !=
+        std::string::npos);
+  CHECK_FALSE(fs::exists(t.file("ns")));
+
+  // x and y swapped: the anchors are the path's mirror image, which the pose graph fits by
+  // turning the path over. Refused; accepted with --allow-upside-down, the cameras then upside
+  // down in the output.
+  const std::string swapped = t.write("swapped.csv", anchors(true));
+  const Run mirror = correct(traj, swapped, "mirror");
+  INFO(mirror.output);
+  CHECK(mirror.code == 1);
+  CHECK(mirror.output.find("fit the path only turned over") != std::string::npos);
+  CHECK(mirror.output.find("the anchors of " + swapped) != std::string::npos);
+  CHECK(mirror.output.find("latitude and longitude swapped") != std::string::npos);
+  CHECK_FALSE(fs::exists(t.file("mirror")));
+  const Run allowed = correct(traj, swapped, "allowed", " --allow-upside-down");
+  INFO(allowed.output);
+  CHECK(allowed.code == 0);
+
+  // World-to-camera poses (T_cw) where camera-to-world are expected: the "centres" trace
+  // another curve, which no drift bends onto the anchors. Here the screening's graph is rank
+  // deficient (the first "centres" coincide), and the uncertainty's drift factor tells.
+  const Run inverted = correct(
+      t.write("traj_cw.txt", tum(1.0, [](const lie::SE3d& T_wc) { return T_wc.inverse(); })), good,
+      "inverted");
+  INFO(inverted.output);
+  CHECK(inverted.code == 1);
+  CHECK(inverted.output.find("does not have the anchors' shape") != std::string::npos);
+  CHECK(inverted.output.find("the correction stretched it by") != std::string::npos);
+  CHECK(inverted.output.find("World-to-camera poses where camera-to-world are expected") !=
+        std::string::npos);
+  CHECK_FALSE(fs::exists(t.file("inverted")));
+
+  // Cameras in OpenGL's axes (y up, z backwards) are not a mirror: they move along -z. The
+  // path is corrected, to the same positions as in OpenCV's axes.
+  const Run gl = correct(
+      t.write("traj_gl.txt", tum(1.0,
+                                 [](const lie::SE3d& T_wc) {
+                                   return T_wc *
+                                          lie::SE3d(lie::SO3d::exp(Eigen::Vector3d(M_PI, 0, 0)),
+                                                    Eigen::Vector3d::Zero());
+                                 })),
+      good, "gl");
+  INFO(gl.output);
+  REQUIRE(gl.code == 0);
+  const io::Trajectory a = io::read_trajectory(t.file("ok/trajectory_tum.txt"));
+  const io::Trajectory b = io::read_trajectory(t.file("gl/trajectory_tum.txt"));
+  REQUIRE(a.poses.size() == b.poses.size());
+  double worst = 0;
+  for (std::size_t k = 0; k < a.poses.size(); ++k)
+    worst = std::max(
+        worst,
+        (a.poses[k].T_cw.inverse().translation() - b.poses[k].T_cw.inverse().translation()).norm());
+  INFO("largest distance between the OpenCV and OpenGL runs: " << worst << " m");
+  CHECK(worst < 0.05);
+}

@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 #include <random>
 
+#include "geodrift/correction/input_checks.hpp"
 #include "geodrift/correction/residuals/geo_view_centre.hpp"
 #include "geodrift/correction/residuals/init_similarity.hpp"
 #include "support/numeric_jacobian.hpp"
@@ -211,4 +212,66 @@ TEST_CASE("planar_diameter is the largest horizontal distance, on hulls of every
     CHECK(correction::detail::planar_diameter(p) == Approx(brute(p)).margin(1e-12));
   }
   CHECK(correction::detail::planar_diameter({}) == 0.0);
+}
+
+TEST_CASE("A corrected path turned over by mirrored anchors is told from an upright one",
+          "[correction][input_checks]") {
+  // A car's camera (OpenCV axes: x right, y down, z forward) driving a left-hand curve in W
+  // (z up), 1.5 m per keyframe, with a little roll and pitch.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> wobble(0.0, 0.03);
+  std::vector<lie::SE3d> upright, over, gl, reversing;
+  const Eigen::Matrix3d cam_from_body =
+      (Eigen::Matrix3d() << 0, -1, 0, 0, 0, -1, 1, 0, 0).finished();  // body x fwd, z up
+  for (int i = 0; i < 200; ++i) {
+    const double yaw = 0.01 * i;
+    const Eigen::Vector3d c(150 * std::sin(yaw), 150 * (1 - std::cos(yaw)), 0);  // radius 150 m
+    const Eigen::Matrix3d R_wb = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                                  Eigen::AngleAxisd(wobble(rng), Eigen::Vector3d::UnitX()) *
+                                  Eigen::AngleAxisd(wobble(rng), Eigen::Vector3d::UnitY()))
+                                     .toRotationMatrix();
+    const Eigen::Matrix3d R_cw = cam_from_body * R_wb.transpose();
+    upright.emplace_back(lie::SO3d(Eigen::Quaterniond(R_cw)), -R_cw * c);
+    // Turned over: the whole path rotated by 180 degrees about W's x axis (what a Sim(3) pose
+    // graph does to fit anchors mirrored in y).
+    const Eigen::Matrix3d F = Eigen::Vector3d(1, -1, -1).asDiagonal();
+    over.emplace_back(lie::SO3d(Eigen::Quaterniond(R_cw * F)), -R_cw * F * (F * c));
+    // OpenGL axes (y up, z backwards): the camera rotated by 180 degrees about its x axis.
+    const Eigen::Matrix3d G = F * R_cw;
+    gl.emplace_back(lie::SO3d(Eigen::Quaterniond(G)), -G * c);
+  }
+  // Driving backwards, upside down: not the forward signature.
+  for (int i = 199; i >= 0; --i) reversing.push_back(over[i]);
+
+  const correction::CameraAttitude a = correction::camera_attitude(upright);
+  CHECK(a.keyframes == 200);
+  CHECK(a.upside_down == 0);
+  CHECK(a.moving == 199);
+  CHECK(a.forward == 199);
+  CHECK_FALSE(a.turned_over());
+  const correction::CameraAttitude b = correction::camera_attitude(over);
+  CHECK(b.upside_down == 200);
+  CHECK(b.forward == 199);
+  CHECK(b.turned_over());
+  const correction::CameraAttitude g = correction::camera_attitude(gl);
+  CHECK(g.upside_down == 200);  // in OpenCV's reading
+  CHECK(g.forward == 0);        // but it moves along -z
+  CHECK_FALSE(g.turned_over());
+  CHECK_FALSE(correction::camera_attitude(reversing).turned_over());
+  CHECK_FALSE(correction::camera_attitude({}).turned_over());
+}
+
+TEST_CASE("Implausible drift needs both a large drift factor and a stretched scale",
+          "[correction][input_checks]") {
+  std::vector<double> s(101);
+  for (int i = 0; i <= 100; ++i) s[i] = std::exp(0.05 * i);  // e^0 .. e^5
+  // 5th and 95th percentiles: e^0.25 and e^4.75.
+  CHECK(correction::scale_spread(s) == Approx(std::exp(4.5)).epsilon(1e-12));
+  CHECK(std::isnan(correction::scale_spread({2.0})));
+  CHECK(correction::scale_spread({1.0, 3.0}) == Approx(3.0));
+  CHECK(correction::implausible_drift(460, 17.2));       // KITTI 02 with T_cw read as T_wc
+  CHECK_FALSE(correction::implausible_drift(161, 1.1));  // a 0.7 s clock offset, no drift
+  CHECK_FALSE(correction::implausible_drift(8, 30));     // 30 % wrong anchors, a long drift
+  CHECK_FALSE(correction::implausible_drift(NAN, 30));
+  CHECK_FALSE(correction::implausible_drift(460, NAN));
 }
