@@ -152,16 +152,6 @@ outputs in DIR (every file states frame, units and the geodrift version)
   report.json         version, command line, parameters, INIT result, per-step timings
 )";
 
-/// Raw pose at `fraction` between two poses: centre linear, rotation along the geodesic.
-lie::SE3d interpolate(const lie::SE3d& a_cw, const lie::SE3d& b_cw, double fraction) {
-  if (fraction <= 0) return a_cw;
-  const lie::SE3d a = a_cw.inverse(), b = b_cw.inverse();
-  const lie::SO3d dR = a.rotation().inverse() * b.rotation();
-  const lie::SO3d R = a.rotation() * lie::SO3d::exp(fraction * dR.log());
-  const Eigen::Vector3d c = (1 - fraction) * a.translation() + fraction * b.translation();
-  return lie::SE3d(R, c).inverse();
-}
-
 /// Checks the anchors' geometry before anything runs: at least INIT's count, and the first ones
 /// (those INIT uses) not coincident horizontally (a vertical line or a point leaves yaw and scale
 /// unobservable).
@@ -501,8 +491,7 @@ int run_correct(int argc, char** argv) {
   std::vector<map::Correspondence> corr;
   for (std::size_t j = 0; j < anchors.size(); ++j) {
     const io::AnchorLocation& L = locs[j];
-    const std::size_t nxt = std::min(L.index + 1, np - 1);
-    const lie::SE3d T_a = interpolate(traj.poses[L.index].T_cw, traj.poses[nxt].T_cw, L.fraction);
+    const lie::SE3d T_a = io::anchor_pose_cw(traj, L);
     const int k = gov[L.index];
     map::Correspondence c;
     c.id = static_cast<int>(j);

@@ -9,6 +9,7 @@
 #include <csignal>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <random>
 #include <set>
 #include <string>
@@ -635,6 +636,91 @@ TEST_CASE("Anchors are located on the trajectory by frame or by time", "[io][anc
   traj.has_timestamps = false;
   geodrift::test::require_parse_error([&] { io::locate_anchors(early, traj, "anchors.csv"); },
                                       "anchors.csv", 3, "no timestamps");
+}
+
+TEST_CASE("An anchor between two poses sits on a cubic through them, not on their chord",
+          "[io][anchors]") {
+  // KITTI 02's ground truth (shipped), thinned to poses every 3-12 frames as an ORB-SLAM
+  // keyframe trajectory is: each dropped frame, located by frame and by time, against the
+  // chord between its two neighbouring poses.
+  const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+  const io::Trajectory gt = io::read_trajectory(dir + "/poses/02.txt");
+  std::ifstream tf(dir + "/times/02.txt");
+  std::vector<double> times;
+  for (double t; tf >> t;) times.push_back(t);
+  REQUIRE(times.size() == gt.poses.size());
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> gap(3, 12);
+  io::Trajectory thin;
+  thin.has_timestamps = true;
+  std::vector<std::size_t> kept;
+  for (std::size_t k = 0; k < gt.poses.size(); k += gap(rng)) kept.push_back(k);
+  for (std::size_t k : kept) {
+    io::TrajectoryPose p = gt.poses[k];
+    p.frame = static_cast<int>(k);
+    p.timestamp = times[k];
+    thin.poses.push_back(p);
+  }
+  std::vector<io::Anchor> by_frame, by_time;
+  std::vector<Eigen::Vector3d> truth;
+  for (std::size_t j = 0; j + 1 < kept.size(); ++j)
+    for (std::size_t k = kept[j] + 1; k < kept[j + 1]; ++k) {
+      io::Anchor a;
+      a.frame = static_cast<int>(k);
+      by_frame.push_back(a);
+      a.frame = -1;
+      a.timestamp = times[k];
+      by_time.push_back(a);
+      truth.push_back(gt.poses[k].T_cw.inverse().translation());
+    }
+  for (const auto* anchors : {&by_frame, &by_time}) {
+    const std::vector<io::AnchorLocation> loc = io::locate_anchors(*anchors, thin, "a.csv");
+    double cubic = 0, chord = 0, worst_cubic = 0, worst_chord = 0;
+    for (std::size_t j = 0; j < loc.size(); ++j) {
+      const Eigen::Vector3d c = io::anchor_pose_cw(thin, loc[j]).inverse().translation();
+      const Eigen::Vector3d a = thin.poses[loc[j].index].T_cw.inverse().translation();
+      const Eigen::Vector3d b = thin.poses[loc[j].index + 1].T_cw.inverse().translation();
+      const Eigen::Vector3d lin = a + loc[j].fraction * (b - a);
+      cubic += (c - truth[j]).norm();
+      chord += (lin - truth[j]).norm();
+      worst_cubic = std::max(worst_cubic, (c - truth[j]).norm());
+      worst_chord = std::max(worst_chord, (lin - truth[j]).norm());
+    }
+    cubic /= static_cast<double>(loc.size());
+    chord /= static_cast<double>(loc.size());
+    INFO((anchors == &by_frame ? "by frame" : "by time")
+         << ": mean distance to the true centre, cubic " << cubic << " m, chord " << chord
+         << " m; worst " << worst_cubic << " / " << worst_chord << " m over " << loc.size());
+    CHECK(chord > 0.08);  // measured 0.096 m (by frame)
+    CHECK(cubic < 0.5 * chord);
+    CHECK(worst_cubic < 0.7 * worst_chord);
+  }
+
+  // At a pose: that pose. The rotation along the geodesic between the two.
+  io::AnchorLocation at;
+  at.index = 5;
+  CHECK((io::anchor_pose_cw(thin, at).matrix() - thin.poses[5].T_cw.matrix()).norm() == 0.0);
+  at.fraction = 0.5;
+  const lie::SO3d Ra = thin.poses[5].T_cw.rotation().inverse();
+  const lie::SO3d Rb = thin.poses[6].T_cw.rotation().inverse();
+  const lie::SO3d Rm = io::anchor_pose_cw(thin, at).rotation().inverse();
+  CHECK((Ra.inverse() * Rm).log().norm() ==
+        Approx(0.5 * (Ra.inverse() * Rb).log().norm()).margin(1e-12));
+
+  // A jump next to the anchor's interval (50 m from one pose to the next): the tangent it
+  // would pull is not used, the centre stays on the chord's side of the jump.
+  io::Trajectory line;
+  for (int k = 0; k < 6; ++k) {
+    io::TrajectoryPose p;
+    p.frame = k;
+    const double x = k + (k >= 4 ? 50.0 : 0.0);  // 1 m per frame, a 50 m leap from 3 to 4
+    p.T_cw = lie::SE3d(lie::SO3d(), Eigen::Vector3d(-x, 0, 0));
+    line.poses.push_back(p);
+  }
+  io::AnchorLocation mid;
+  mid.index = 2;
+  mid.fraction = 0.5;
+  CHECK(io::anchor_pose_cw(line, mid).inverse().translation().x() == Approx(2.5).margin(1e-12));
 }
 
 TEST_CASE("Anchors in another clock than the trajectory's are named: unit or GPS epoch",
