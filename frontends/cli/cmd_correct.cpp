@@ -902,6 +902,9 @@ int run_correct(int argc, char** argv) {
         << ", \"screening_innovation_m\": "
         << json_num(screening.ok ? screening.anchors[x.id].innovation_m : NAN)
         << ", \"screening_sd_m\": " << json_num(screening.ok ? screening.anchors[x.id].sd_m : NAN)
+        << ", \"screening_run_length\": " << (screening.ok ? screening.anchors[x.id].run_length : 0)
+        << ", \"screening_run_offset_m\": "
+        << json_num(screening.ok ? screening.anchors[x.id].run_offset_m : NAN)
         << ", \"residual_2d_m\": " << json_num(r.head<2>().norm())
         << ", \"residual_3d_m\": " << json_num(r.norm()) << ", \"prediction_chi2\": "
         << json_num(prediction_chi2.count(x.id) ? prediction_chi2.at(x.id) : NAN) << "}";

@@ -8,6 +8,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <unordered_map>
 
 #include "geodrift/correction/replay.hpp"
@@ -208,6 +209,55 @@ TEST_CASE("Screening leaves out wrong anchors, INIT's among them, and keeps the 
     CHECK(w == static_cast<int>(wrong.size()));
     CHECK(right <= 2);
     CHECK(r.mean_2d <= 1.05 * floor);
+  }
+}
+
+TEST_CASE("Screening leaves out a run of anchors off together, and nothing on clean runs",
+          "[correction][robust]") {
+  // GNSS multipath along a street canyon: consecutive fixes off by the same offset vouch for
+  // each other, and one by one none stands out (before the run test: none left out, mean 2D
+  // error several times the clean run's on our VO; docs/correcting_slam.md).
+  const sim::SimulatedSequence s = test::simulate_kitti("02", 3, 2500);
+  std::vector<map::Correspondence> corr = sim::kitti_correspondences(s, 20);
+  REQUIRE(corr.size() >= 100);
+  std::mt19937 rng(17);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  for (auto& c : corr) {  // fixes with 2 m of noise, as stated
+    c.y_w += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    c.sigma_m = 2.0;
+  }
+  correction::AnchorScreening sc;
+  const Run clean = correct_screened(s, corr, &sc);
+  int in_runs = 0;
+  for (const auto& a : sc.anchors) in_runs += a.run_length > 0;
+  INFO("clean: mean 2D error " << clean.mean_2d << " m, left out " << sc.num_left_out());
+  CHECK(in_runs == 0);
+  CHECK(sc.num_left_out() <= 2);
+  for (const auto& [first, length, offset] :
+       {std::tuple<int, int, Eigen::Vector3d>{40, 8, {25, 15, 0}},
+        std::tuple<int, int, Eigen::Vector3d>{60, 15, {-20, 30, 0}}}) {
+    std::vector<map::Correspondence> bad = corr;
+    std::vector<int> run;
+    for (int j = first; j < first + length; ++j) {
+      bad[j].y_w += offset;
+      run.push_back(j);
+    }
+    const Run r = correct_screened(s, bad, &sc);
+    const auto [w, right] = left_out(sc, run);
+    std::vector<map::Correspondence> rest;
+    for (int j = 0; j < static_cast<int>(corr.size()); ++j)
+      if (j < first || j >= first + length) rest.push_back(corr[j]);
+    const double floor = correct(s, rest, /*gate=*/false).mean_2d;
+    INFO("run of " << length << " off by " << offset.norm() << " m: mean 2D error " << r.mean_2d
+                   << " m (clean " << clean.mean_2d << " m, without the run " << floor
+                   << " m); left out " << w << " of the run, " << right << " others; "
+                   << sc.anchors[first].why);
+    CHECK(w == length);
+    CHECK(right <= 2);
+    CHECK(r.mean_2d <= 1.05 * floor);
+    CHECK(sc.anchors[first].run_length >= 2);
+    CHECK(std::abs(sc.anchors[first].run_offset_m - offset.norm()) < 5.0);
+    CHECK(sc.anchors[first].why.find("consecutive anchors off together") != std::string::npos);
   }
 }
 

@@ -40,6 +40,13 @@
 ///      left-out anchors that agree with each other (their displacement matches the path's
 ///      between them: it was the path, bent in a turn, that disagreed with the rest; two wrong
 ///      geo-tags are off independently). An anchor goes out or back in at most max_flips times.
+///   4. Runs: consecutive anchors off by one common offset (GNSS multipath along a street
+///      canyon, one capture run registered wrongly) vouch for each other in the test above, and
+///      the correct anchors at the run's ends look wrong instead. Each stretch of 2 to
+///      max_run_anchors consecutive anchors in use is tested for a common horizontal offset
+///      (leave_out_run below); one whose residuals step in and back out at both ends is left
+///      out whole and stays out. Before step 1's single anchors (a run left in sets k) and
+///      again when the rounds end (a short run the nominal drift absorbed).
 /// The probability is 0.99999 (threshold 23.0), not 0.999: the simulated and real drift is
 /// heavier-tailed than the Gaussian model in turns, and at 0.999 a clean run lost 2-4 % of its
 /// correct anchors; at 0.99999 about 0.3 %, while a 20 m shift 100 frames from its neighbours
@@ -94,6 +101,9 @@ struct AnchorScreeningOptions {
   double min_factor = 1e-2, max_factor = 1e4;  ///< bounds of the drift factor k
   /// Times an anchor may go out or back in (the rounds then end).
   int max_flips = 4;
+  /// Runs (step 4 of the file comment): the longest stretch of consecutive anchors tested for
+  /// a common offset (0: no run test). A run is also at most half the anchors in use less one.
+  int max_run_anchors = 20;
   int max_rounds = 60;
   int max_iterations = 100;  ///< LM iterations per solve
   int num_threads = 1;
@@ -114,6 +124,7 @@ struct AnchorScreeningOptions {
     if (!(min_factor > 0 && max_factor >= min_factor && std::isfinite(max_factor)))
       return fail("factors must satisfy 0 < min_factor <= max_factor < inf");
     if (max_rounds < 1 || max_iterations < 1) return fail("max_rounds, max_iterations >= 1");
+    if (max_run_anchors < 0) return fail("max_run_anchors must be >= 0");
     return true;
   }
 };
@@ -130,6 +141,11 @@ struct ScreenedAnchor {
   double sd_m = std::numeric_limits<double>::quiet_NaN();
   double statistic = std::numeric_limits<double>::quiet_NaN();
   int readmissions = 0;
+  /// Left out with a run of this many consecutive anchors off together (0: not in a run), the
+  /// run's common horizontal offset (metres) and its test statistic (χ²₂ for a correct run).
+  int run_length = 0;
+  double run_offset_m = std::numeric_limits<double>::quiet_NaN();
+  double run_statistic = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct AnchorScreening {
@@ -295,6 +311,113 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     lm.num_threads = options.num_threads;
     return solver::LevenbergMarquardt(lm).solve(problem);
   };
+  auto centre_cov = [](const lie::Sim3d& X, const lie::Sim3d& Y, const Eigen::MatrixXd& B) {
+    // Cov(c_X, c_Y) from the tangent block: c ← c − (1/s)·Rᵀ·ν.
+    const Eigen::Matrix3d AX = X.rotation().matrix().transpose() / X.scale();
+    const Eigen::Matrix3d AY = Y.rotation().matrix().transpose() / Y.scale();
+    return Eigen::Matrix3d(AX * B.bottomRightCorner<3, 3>() * AY.transpose());
+  };
+  // The longest run tested among n anchors in use: a minority, so that the rest can say which
+  // side is off.
+  auto run_limit = [&](int n) { return std::min(options.max_run_anchors, (n - 1) / 2); };
+  std::vector<double> run_threshold(na, std::numeric_limits<double>::quiet_NaN());
+  // Step 4: the stretch of consecutive anchors in use `u` (keyframe order) whose geo-tags most
+  // likely share one horizontal offset b. With r the residuals y − ĉ at the solve, R their
+  // covariance and Q_r = R − C_ĉ theirs at the optimum (C_ĉ the centres' joint covariance), the
+  // generalised likelihood-ratio test of b on a window W (Teunissen's w-test with the signature
+  // "every anchor of W shifted alike") is
+  //   w = Σ_W R⁻¹·r_h,  S = Σ_{i,j∈W} R⁻¹·Q_r,ij·R⁻¹ (horizontal blocks),  T = wᵀ·S⁻¹·w ~ χ²₂,
+  // b̂ = S⁻¹·w. For one anchor T is the leave-one-out statistic above. The window with the
+  // largest T over all windows of 1 to run_limit anchors is the most likely offset stretch; it
+  // is left out when it has two or more anchors and T passes the threshold raised for the
+  // number of windows tried (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
+  auto leave_out_run = [&](const std::vector<int>& u, const solver::Covariance& cov) {
+    const int n = static_cast<int>(u.size());
+    const int len_max = run_limit(n);
+    if (len_max < 2) return false;
+    std::vector<Eigen::Vector2d> rh(n), rw(n);
+    std::vector<double> w2(n);
+    for (int q = 0; q < n; ++q) {
+      const int j = u[q];
+      w2[q] = 1.0 / (sigma[j] * sigma[j]);
+      rh[q] = (anchors[j].y_w - V[j].inverse().translation()).head<2>();
+      rw[q] = w2[q] * rh[q];
+    }
+    auto Qu = [&](int qa, int qb) {  // Cov(r_a, r_b), horizontal
+      const int a = u[qa], b = u[qb];
+      Eigen::Matrix2d X = -(qa == qb ? centre_cov(V[a], V[a], cov.block(&V[a]))
+                                     : centre_cov(V[a], V[b], cov.block(&V[a], &V[b])))
+                               .topLeftCorner<2, 2>();
+      if (qa == qb) X += sigma[a] * sigma[a] * Eigen::Matrix2d::Identity();
+      return X;
+    };
+    auto Q = [&](int qa, int qb) { return Eigen::Matrix2d(w2[qa] * w2[qb] * Qu(qa, qb)); };
+    // A run starts and ends with a step: the residual jumps between the last correct anchor and
+    // the first of the run, and back after its last, where a stretch the path drifted away
+    // from (a turn the model underrates) changes gradually. edge[q]: the jump from q − 1 to q,
+    // significant at the single anchors' threshold.
+    std::vector<Eigen::Vector2d> jump(n, Eigen::Vector2d::Zero());
+    std::vector<char> edge(n, 0);
+    for (int q = 1; q < n; ++q) {
+      jump[q] = rh[q] - rh[q - 1];
+      const Eigen::Matrix2d X = Qu(q - 1, q);
+      const Eigen::Matrix2d D = Qu(q, q) + Qu(q - 1, q - 1) - X - X.transpose();
+      const Eigen::Matrix2d Ds = 0.5 * (D + D.transpose());
+      edge[q] = Ds.determinant() > 0 && Ds.trace() > 0 &&
+                jump[q].dot(Ds.inverse() * jump[q]) > out.threshold;
+    }
+    // Only where the anchors are dense: each predicted by the others and the path to within
+    // 2 σ of its own (its prediction SD, at this k). Between sparse anchors the path drifts by
+    // more than a fix is off, and a stretch it drifted away from steps like a run.
+    std::vector<char> dense(n, 0);
+    for (int q = 0; q < n; ++q) {
+      const int j = u[q];
+      dense[q] = out.anchors[j].testable && Ph[j].allFinite() &&
+                 0.5 * Ph[j].trace() <= 4.0 * sigma[j] * sigma[j];
+    }
+    double best = 0;
+    int best_q = -1, best_len = 0;
+    Eigen::Vector2d best_b = Eigen::Vector2d::Zero();
+    long windows = 0;
+    for (int q0 = 1; q0 < n; ++q0) {
+      bool all_dense = dense[q0 - 1];
+      Eigen::Vector2d w = Eigen::Vector2d::Zero();
+      Eigen::Matrix2d S = Eigen::Matrix2d::Zero();
+      for (int len = 1; len <= len_max && q0 + len < n; ++len) {
+        const int qb = q0 + len - 1;
+        w += rw[qb];
+        S += Q(qb, qb);
+        for (int q = q0; q < qb; ++q) {
+          const Eigen::Matrix2d X = Q(q, qb);
+          S += X + X.transpose();
+        }
+        windows += len >= 2;
+        all_dense = all_dense && dense[qb];
+        if (!all_dense) break;
+        if (!edge[q0] || !edge[qb + 1] || !dense[qb + 1]) continue;
+        const Eigen::Matrix2d Ss = 0.5 * (S + S.transpose());
+        if (!(Ss.determinant() > 0 && Ss.trace() > 0)) continue;
+        const Eigen::Vector2d b = Ss.inverse() * w;
+        // In with +b, out with -b.
+        if (!(jump[q0].dot(b) > 0 && jump[qb + 1].dot(b) < 0)) continue;
+        const double T = w.dot(b);
+        if (T > best) best = T, best_q = q0, best_len = len, best_b = b;
+      }
+    }
+    if (best_len < 2 || windows == 0) return false;
+    const double threshold = out.threshold + 2.0 * std::log(static_cast<double>(windows));
+    if (!(best > threshold)) return false;
+    for (int q = best_q; q < best_q + best_len; ++q) {
+      ScreenedAnchor& a = out.anchors[u[q]];
+      run_threshold[u[q]] = threshold;
+      a.used = false;
+      a.run_length = best_len;
+      a.run_offset_m = best_b.norm();
+      a.run_statistic = best;
+      flips[u[q]] = options.max_flips;  // out for good: one by one, each would pass again
+    }
+    return true;
+  };
   auto used_mask = [&]() {
     std::vector<char> use(na);
     for (int j = 0; j < na; ++j) use[j] = out.anchors[j].used;
@@ -323,6 +446,17 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     for (int q = 0; q + 1 < na; ++q)
       if (!out.anchors[order[q]].used && !out.anchors[order[q + 1]].used)
         pairs.emplace_back(&V[order[q]], &V[order[q + 1]]);
+    // ... and of anchors in use up to a run apart (step 4), once k is estimated.
+    std::vector<int> in_use_order;
+    if (options.max_run_anchors >= 2) {
+      for (int j : order)
+        if (out.anchors[j].used) in_use_order.push_back(j);
+      const int n = static_cast<int>(in_use_order.size());
+      const int len = run_limit(n);
+      for (int q = 0; len >= 2 && q < n; ++q)
+        for (int d = 1; d < len && q + d < n; ++d)
+          pairs.emplace_back(&V[in_use_order[q]], &V[in_use_order[q + d]]);
+    }
     solver::Covariance cov;
     if (!cov.compute(problem, wanted, pairs, &why)) {
       for (auto& a : out.anchors) a = ScreenedAnchor{};
@@ -371,6 +505,9 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       a.statistic = T[j];
     }
     if (in_use < 3) break;
+    // Runs first, at the model's nominal drift: a run's anchors vouch for each other, while
+    // the correct anchors at its ends look wrong and would go one by one.
+    if (!estimate_k && !in_use_order.empty() && leave_out_run(in_use_order, cov)) continue;
     // Leave out the worst inconsistent anchors: T above the threshold and the largest among
     // the in-use neighbours (in keyframe order).
     std::vector<int> leave;
@@ -456,12 +593,6 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
         continue;
       const Eigen::Vector3d ca = V[a].inverse().translation(), cb = V[b].inverse().translation();
       const Eigen::Vector2d d = ((anchors[b].y_w - anchors[a].y_w) - (cb - ca)).head<2>();
-      auto centre_cov = [&](const lie::Sim3d& X, const lie::Sim3d& Y, const Eigen::MatrixXd& B) {
-        // Cov(c_X, c_Y) from the tangent block: c ← c − (1/s)·Rᵀ·ν.
-        const Eigen::Matrix3d AX = X.rotation().matrix().transpose() / X.scale();
-        const Eigen::Matrix3d AY = Y.rotation().matrix().transpose() / Y.scale();
-        return Eigen::Matrix3d(AX * B.bottomRightCorner<3, 3>() * AY.transpose());
-      };
       const Eigen::Matrix3d Caa = centre_cov(V[a], V[a], cov.block(&V[a]));
       const Eigen::Matrix3d Cbb = centre_cov(V[b], V[b], cov.block(&V[b]));
       const Eigen::Matrix3d Cab = centre_cov(V[a], V[b], cov.block(&V[a], &V[b]));
@@ -472,6 +603,8 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       readmit_anchor(a);
       readmit_anchor(b);
     }
+    // Runs again at the data's drift level: a short run the nominal drift absorbs stands out.
+    if (!changed && !in_use_order.empty()) changed = leave_out_run(in_use_order, cov);
     if (!changed) break;
   }
   out.drift_factor = k;
@@ -483,8 +616,16 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     if (a.used) continue;
     std::ostringstream w;
     w.precision(3);
-    w << "inconsistent with the other anchors";
-    if (a.testable) {
+    if (a.run_length > 0) {
+      // Its own statistic is now that of a left-out anchor against the path without the run.
+      w << "one of " << a.run_length << " consecutive anchors off together by " << a.run_offset_m
+        << " m (test of a common offset " << a.run_statistic << " > " << run_threshold[j]
+        << "): a run of geo-tags with one error (GNSS multipath, one mis-registered capture)";
+      if (a.testable)
+        w << "; " << a.innovation_m << " m from where the other anchors and the path put its view "
+          << "(SD " << a.sd_m << " m)";
+    } else if (a.testable) {
+      w << "inconsistent with the other anchors";
       w << ": " << a.innovation_m << " m from where they and the path put its view (SD " << a.sd_m
         << " m; test " << a.statistic;
       if (a.statistic > out.threshold)
@@ -494,7 +635,8 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       else
         w << "; in and out " << flips[j] << " times, left out)";
     } else {
-      w << " (left out in an earlier round; not testable in the last)";
+      w << "inconsistent with the other anchors (left out in an earlier round; not testable in "
+           "the last)";
     }
     a.why = w.str();
   }
@@ -566,6 +708,9 @@ inline AnchorScreening screen_anchors_by_geotag(const std::vector<map::Keyframe>
   // make the path stiff enough to throw out correct geo-tags' localizations.
   AnchorScreeningOptions at_k = options;
   if (tags.ok) at_k.min_factor = at_k.max_factor = tags.drift_factor;
+  // Nor runs: a geo-tag's localizations are a run by construction (one offset, its error),
+  // and after level 1 the geo-tags are right.
+  at_k.max_run_anchors = 0;
   const AnchorScreening views = screen_anchors(keyframes, sub, at_k);
 
   AnchorScreening out;
