@@ -327,10 +327,11 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   // generalised likelihood-ratio test of b on a window W (Teunissen's w-test with the signature
   // "every anchor of W shifted alike") is
   //   w = Σ_W R⁻¹·r_h,  S = Σ_{i,j∈W} R⁻¹·Q_r,ij·R⁻¹ (horizontal blocks),  T = wᵀ·S⁻¹·w ~ χ²₂,
-  // b̂ = S⁻¹·w. For one anchor T is the leave-one-out statistic above. The window with the
-  // largest T over all windows of 1 to run_limit anchors is the most likely offset stretch; it
-  // is left out when it has two or more anchors and T passes the threshold raised for the
-  // number of windows tried (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
+  // b̂ = S⁻¹·w. For one anchor T is the leave-one-out statistic above. Of the windows of 1 to
+  // run_limit anchors that step in and out at both ends among dense anchors (below), the one
+  // with the largest T is the most likely offset stretch; it is left out when it has two or
+  // more anchors and T passes the threshold raised for the number of windows tried
+  // (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
   auto leave_out_run = [&](const std::vector<int>& u, const solver::Covariance& cov) {
     const int n = static_cast<int>(u.size());
     const int len_max = run_limit(n);
@@ -446,7 +447,7 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     for (int q = 0; q + 1 < na; ++q)
       if (!out.anchors[order[q]].used && !out.anchors[order[q + 1]].used)
         pairs.emplace_back(&V[order[q]], &V[order[q + 1]]);
-    // ... and of anchors in use up to a run apart (step 4), once k is estimated.
+    // ... and of anchors in use up to a run apart (step 4's stretches).
     std::vector<int> in_use_order;
     if (options.max_run_anchors >= 2) {
       for (int j : order)
