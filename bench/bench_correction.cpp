@@ -7,10 +7,12 @@
 #include <benchmark/benchmark.h>
 
 #include <memory>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "geodrift/correction/replay.hpp"
+#include "geodrift/correction/screening.hpp"
 #include "geodrift/eval/errors.hpp"
 #include "geodrift/sim/drift_simulator.hpp"
 #include "geodrift/sim/kitti_protocol.hpp"
@@ -119,6 +121,49 @@ BENCHMARK(BM_Correct_Kitti02_Interval100)
     ->Args({static_cast<int>(correction::Mode::kOurs), 2})
     ->Args({static_cast<int>(correction::Mode::kOurs), 3})
     ->Args({static_cast<int>(correction::Mode::kFullBatch), 0})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3);
+
+// The anchor screening (correction/screening.hpp) on dense GNSS-like fixes: the simulated
+// KITTI 02 sequence (seed 1), a fix every range(0) frames with 2 m of noise (sigma_m 2).
+// range(1) = 0: without the run test (max_run_anchors 0), the floor measured in the same run;
+// 1: the defaults, the run test's stretches of up to 20 fixes, whose cross-covariances come
+// through the keyframes' chain (detail::TreeCrossCovariance).
+void BM_Screen_DenseFixes(benchmark::State& state) {
+  static const std::unique_ptr<sim::SimulatedSequence> s = [] {
+    const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
+    const sim::KittiSequence seq = sim::load_kitti_sequence(
+        dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
+    return std::make_unique<sim::SimulatedSequence>(
+        sim::simulate(seq, sim::SimOptions::kitti("02", 1)));
+  }();
+  std::vector<map::Correspondence> fixes =
+      sim::kitti_correspondences(*s, static_cast<int>(state.range(0)));
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  for (auto& c : fixes) {
+    c.y_w += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    c.sigma_m = 2.0;
+  }
+  correction::AnchorScreeningOptions opt;
+  if (state.range(1) == 0) opt.max_run_anchors = 0;
+  correction::AnchorScreening sc;
+  for (auto _ : state) {
+    sc = correction::screen_anchors(s->map.keyframes, fixes, opt);
+    benchmark::DoNotOptimize(sc.anchors.data());
+  }
+  state.SetLabel(state.range(1) == 0 ? "no run test (floor)" : "defaults");
+  state.counters["fixes"] = static_cast<double>(fixes.size());
+  state.counters["keyframes"] = static_cast<double>(s->map.keyframes.size());
+  state.counters["left_out"] = sc.num_left_out();
+  state.counters["rounds"] = sc.rounds;
+  state.counters["ok"] = sc.ok;
+}
+BENCHMARK(BM_Screen_DenseFixes)
+    ->Args({10, 0})
+    ->Args({10, 1})
+    ->Args({2, 0})
+    ->Args({2, 1})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(3);
 

@@ -16,7 +16,8 @@ BENCHMARKS.md section):
   solver_sim3_paired*.json  bench_solver --benchmark_filter=Sim3Drift_Paired (one file per seed)
   solver_cholmod_ba.json    bench_solver, the CHOLMOD-per-step and BA rows with their floors
   solver_se3.json           bench_solver, the SE(3) g2o rows with their floors
-  correction.json           bench_correction
+  correction.json           bench_correction --benchmark_filter=Correct
+  screening.json            bench_correction --benchmark_filter=Screen
   vo.json                   bench_vo
   kvld.json                 bench_kvld
   geotag.json               bench_geotag
@@ -351,12 +352,35 @@ def t_render(results):
                  rows) + ["", run_line(ctx, path)]
 
 
+def t_screening(results):
+    path = os.path.join(results, "screening.json")
+    if not os.path.exists(path):
+        return None
+    ctx, bench = load(path)
+    rows = []
+    for interval in (10, 2):
+        floor = bench.get(f"BM_Screen_DenseFixes/{interval}/0")
+        full = bench.get(f"BM_Screen_DenseFixes/{interval}/1")
+        if not floor or not full:
+            continue
+        for b, label in ((floor, "no run test (floor)"), (full, "defaults (run test)")):
+            rel = c(b, "cpu_time") / c(floor, "cpu_time")
+            rows.append([f"every {interval} frames: {c(b, 'fixes'):.0f} fixes on "
+                         f"{c(b, 'keyframes'):.0f} keyframes", label, ms(c(b, "cpu_time")),
+                         ratio(rel), f"{c(b, 'rounds'):.0f}", f"{c(b, 'left_out'):.0f}"])
+    if not rows:
+        return None
+    return table(["fixes", "screening", "CPU [ms]", "CPU / floor", "rounds", "left out"],
+                 rows) + ["", run_line(ctx, path)]
+
+
 TABLES = {
     "sim3_paired": t_sim3_paired,
     "sim3_cholmod": t_sim3_cholmod,
     "ba": t_ba,
     "se3": t_se3,
     "correction": t_correction,
+    "screening": t_screening,
     "vo": t_vo,
     "kvld": t_kvld,
     "geotag": t_geotag,

@@ -261,6 +261,87 @@ TEST_CASE("Screening leaves out a run of anchors off together, and nothing on cl
   }
 }
 
+TEST_CASE("Cross-covariances of the screening's tree equal the factor's solves",
+          "[correction][robust]") {
+  // The run test's pairs of views through the keyframes' chain (Σ_ac = Σ_ab·Σ_bb⁻¹·Σ_bc on a
+  // tree) against the Covariance's own solves for off-pattern pairs, on a chain of 60 Sim(3)
+  // keyframes with 0 to 3 views each, geo-tagged or not, and a view left without a prior.
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const int nk = 60;
+  std::vector<lie::Sim3d> S(nk), V;
+  std::vector<int> kf_of;
+  std::vector<Eigen::Vector3d> tag;
+  for (int i = 0; i < nk; ++i) {
+    const Eigen::Vector3d c(10.0 * i + 3 * u(rng), 40 * std::sin(0.1 * i), 2 * u(rng));
+    const lie::SO3d R = lie::SO3d::exp(Eigen::Vector3d(0.1 * u(rng), 0.3 * u(rng), 0.1 * u(rng)));
+    const double s = std::exp(0.2 * u(rng));
+    S[i] = lie::Sim3d(R, -s * (R.matrix() * c), s);  // T_cw with centre c
+    const int views = i % 4 == 1 ? 0 : 1 + (i % 3 == 0) + (i % 7 == 0);
+    for (int v = 0; v < views; ++v) {
+      const Eigen::Vector3d cv = c + Eigen::Vector3d(u(rng), u(rng), 0.2 * u(rng));
+      const lie::SO3d Rv = lie::SO3d::exp(Eigen::Vector3d(0.1 * u(rng), u(rng), 0.1 * u(rng)));
+      V.emplace_back(Rv, -s * (Rv.matrix() * cv), s);
+      kf_of.push_back(i);
+      tag.push_back(cv + Eigen::Vector3d(u(rng), u(rng), u(rng)));
+    }
+  }
+  solver::Problem problem;
+  const solver::RobustLoss trivial;
+  auto info = [&](double sd) {
+    Eigen::Matrix<double, 7, 7> A;
+    for (int r = 0; r < 7; ++r)
+      for (int c = 0; c < 7; ++c) A(r, c) = (r == c) + 0.3 * u(rng);
+    return Eigen::Matrix<double, 7, 7>(A * A.transpose() / (sd * sd));
+  };
+  for (int i = 0, j = 0; i < nk; ++i) {
+    for (; j < static_cast<int>(V.size()) && kf_of[j] == i; ++j) {
+      if (j != 5)  // one view without its geo-tag
+        problem.add_residual_block(solver::CameraCentrePriorResidual<lie::Sim3d>{tag[j]}, trivial,
+                                   1.0 / 4.0, &V[j]);
+      problem.add_residual_block(solver::RelativePoseResidual<lie::Sim3d>{V[j] * S[i].inverse()},
+                                 trivial, info(0.05), &S[i], &V[j]);
+    }
+    if (i > 0)
+      problem.add_residual_block(
+          solver::RelativePoseResidual<lie::Sim3d>{S[i] * S[i - 1].inverse()}, trivial, info(0.02),
+          &S[i - 1], &S[i]);
+  }
+  std::vector<const void*> blocks;
+  std::vector<solver::Covariance::Pair> pairs;
+  correction::detail::TreeCrossCovariance::request(S, V, kf_of, &blocks, &pairs);
+  const int nv = static_cast<int>(V.size());
+  for (int a = 0; a < nv; ++a)
+    for (int b = a + 1; b < nv; ++b) pairs.emplace_back(&V[a], &V[b]);
+  solver::Covariance cov;
+  std::string why;
+  REQUIRE(cov.compute(problem, blocks, pairs, &why));
+  correction::detail::TreeCrossCovariance tree;
+  REQUIRE(tree.build(cov, S, V, kf_of, &why));
+  double worst = 0, largest = 0;  // |difference|, |correlation| (NaN shows in worst)
+  auto keep_worst = [&](double d) { worst = !(d <= worst) ? d : worst; };
+  std::vector<correction::detail::TreeCrossCovariance::Mat7> row;
+  for (int a = 0; a < nv; ++a) {
+    std::vector<int> bs;
+    for (int b = a + 1; b < nv; ++b) bs.push_back(b);
+    tree.row(a, bs, &row);
+    for (int b = 0; b < nv; ++b) {
+      if (b == a) continue;
+      const Eigen::MatrixXd want = cov.block(&V[a], &V[b]);
+      const Eigen::MatrixXd scale =
+          (cov.block(&V[a]).diagonal() * cov.block(&V[b]).diagonal().transpose()).cwiseSqrt();
+      keep_worst(((tree(a, b) - want).array() / scale.array()).abs().maxCoeff());
+      if (b > a) keep_worst(((row[b - a - 1] - want).array() / scale.array()).abs().maxCoeff());
+      largest = std::max(largest, (want.array() / scale.array()).abs().maxCoeff());
+    }
+  }
+  INFO(nv << " views on " << nk << " keyframes; largest correlation " << largest
+          << ", largest difference " << worst);
+  CHECK(nv > 60);
+  CHECK(largest > 0.1);  // the views are correlated through the chain
+  CHECK(worst < 1e-9);   // relative to the SDs: a correlation's difference
+}
+
 TEST_CASE("Screening does not depend on the map's unit, origin or orientation",
           "[correction][robust]") {
   const sim::SimulatedSequence s = test::simulate_kitti("02", 2, 1500);

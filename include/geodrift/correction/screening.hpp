@@ -169,6 +169,102 @@ namespace detail {
 /// χ²₂ quantile: −2·ln(1 − p).
 inline double chi2_2_quantile(double p) { return -2.0 * std::log1p(-p); }
 
+/// Cross-covariances of the view nodes of screen_anchors()' graph from blocks on the factor's
+/// pattern alone. That graph is a tree: the keyframes' chain S_0 – S_1 – … – S_{n−1} and each
+/// view V_j a leaf on its keyframe S_{k(j)}. In a Gaussian whose information matrix has a tree's
+/// pattern, two nodes are independent given any node on the path between them, so
+/// Σ_ac = Σ_ab·Σ_bb⁻¹·Σ_bc, and along V_a – S_ka – S_ka+1 – … – S_kb – V_b (ka ≤ kb):
+///   Σ_{V_a V_b} = Σ_{V_a S_ka}·Σ_{S_ka}⁻¹ · Π_{i=ka}^{kb−1} (Σ_{S_i S_i+1}·Σ_{S_i+1}⁻¹)
+///                 · Σ_{S_kb V_b}.
+/// Every block on the right shares a residual or is diagonal: the Covariance's recursion gives
+/// it without a solve. Asked for the pairs themselves it solves with the whole factor once per
+/// distinct anchor (898 GNSS fixes on 290 keyframes: 2.8 s of screening against 0.06 s without
+/// the pairs of the run test). The products between consecutive anchors' keyframes are formed
+/// once per compute, so a pair costs one 7×7 product per anchor keyframe between the two.
+class TreeCrossCovariance {
+ public:
+  using Mat7 = Eigen::Matrix<double, 7, 7>;
+
+  /// The diagonal blocks and pairs the Covariance has to compute: every S_i and V_j, the
+  /// chain's consecutive pairs between the first and the last anchor's keyframe, and each view
+  /// with its keyframe. `kf_of[j]`: the index in S of view j's keyframe.
+  static void request(const std::vector<lie::Sim3d>& S, const std::vector<lie::Sim3d>& V,
+                      const std::vector<int>& kf_of, std::vector<const void*>* blocks,
+                      std::vector<solver::Covariance::Pair>* pairs) {
+    if (V.empty()) return;
+    const auto [lo, hi] = std::minmax_element(kf_of.begin(), kf_of.end());
+    for (const auto& s : S) blocks->push_back(&s);
+    for (const auto& v : V) blocks->push_back(&v);
+    for (int i = *lo; i < *hi; ++i) pairs->emplace_back(&S[i], &S[i + 1]);
+    for (std::size_t j = 0; j < V.size(); ++j) pairs->emplace_back(&V[j], &S[kf_of[j]]);
+  }
+
+  /// From a Covariance computed with request()'s blocks and pairs.
+  /// @return false (with `why`) if a keyframe's diagonal block is not positive definite.
+  bool build(const solver::Covariance& cov, const std::vector<lie::Sim3d>& S,
+             const std::vector<lie::Sim3d>& V, const std::vector<int>& kf_of,
+             std::string* why = nullptr) {
+    const int na = static_cast<int>(V.size());
+    knots_.assign(kf_of.begin(), kf_of.end());
+    std::sort(knots_.begin(), knots_.end());
+    knots_.erase(std::unique(knots_.begin(), knots_.end()), knots_.end());
+    knot_of_.assign(na, 0);
+    for (int j = 0; j < na; ++j)
+      knot_of_[j] = static_cast<int>(std::lower_bound(knots_.begin(), knots_.end(), kf_of[j]) -
+                                     knots_.begin());
+    // Σ_{S_i}⁻¹ applied on the right: X·Σ⁻¹ = (Σ⁻¹·Xᵀ)ᵀ (Σ symmetric).
+    auto right_inverse = [&](const Mat7& X, int i, Mat7* out) {
+      const Mat7 Sii = cov.block(&S[i]);
+      const Eigen::LLT<Mat7> llt(0.5 * (Sii + Sii.transpose()));
+      if (llt.info() == Eigen::Success) return *out = llt.solve(X.transpose()).transpose(), true;
+      if (why)
+        *why = "the covariance of keyframe " + std::to_string(i) + " is not positive definite";
+      return false;
+    };
+    left_.resize(na);
+    right_.resize(na);
+    for (int j = 0; j < na; ++j) {
+      right_[j] = cov.block(&S[kf_of[j]], &V[j]);
+      if (!right_inverse(cov.block(&V[j], &S[kf_of[j]]), kf_of[j], &left_[j])) return false;
+    }
+    step_.assign(knots_.empty() ? 0 : knots_.size() - 1, Mat7::Identity());
+    for (std::size_t m = 0; m + 1 < knots_.size(); ++m)
+      for (int i = knots_[m]; i < knots_[m + 1]; ++i) {
+        Mat7 A;
+        if (!right_inverse(cov.block(&S[i], &S[i + 1]), i + 1, &A)) return false;
+        step_[m] = step_[m] * A;
+      }
+    return true;
+  }
+
+  /// Σ_{V_a V_b} (7×7, the Covariance's tangent coordinates), a ≠ b.
+  Mat7 operator()(int a, int b) const {
+    if (knot_of_[a] > knot_of_[b]) return (*this)(b, a).transpose();
+    Mat7 G = left_[a];
+    for (int m = knot_of_[a]; m < knot_of_[b]; ++m) G = G * step_[m];
+    return G * right_[b];
+  }
+
+  /// Σ_{V_a V_b} for each b of `bs` (keyframe order, none before a's keyframe, none == a), in
+  /// one walk along the chain.
+  void row(int a, const std::vector<int>& bs, std::vector<Mat7>* out) const {
+    out->resize(bs.size());
+    Mat7 G = left_[a];
+    int m = knot_of_[a];
+    for (std::size_t t = 0; t < bs.size(); ++t) {
+      for (; m < knot_of_[bs[t]]; ++m) G = G * step_[m];
+      (*out)[t] = G * right_[bs[t]];
+    }
+  }
+
+ private:
+  std::vector<int> knots_;    ///< the views' keyframes (indices in S, sorted, distinct)
+  std::vector<int> knot_of_;  ///< per view, its keyframe's position in knots_
+  std::vector<Mat7> left_;    ///< Σ_{V_j S_k(j)}·Σ_{S_k(j)}⁻¹
+  std::vector<Mat7> right_;   ///< Σ_{S_k(j) V_j}
+  std::vector<Mat7> step_;    ///< Π over the chain from knot m to knot m + 1
+};
+
 }  // namespace detail
 
 /// Tests every anchor against all the others along the raw path `keyframes` (time order, T_cw
@@ -332,7 +428,8 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   // with the largest T is the most likely offset stretch; it is left out when it has two or
   // more anchors and T passes the threshold raised for the number of windows tried
   // (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
-  auto leave_out_run = [&](const std::vector<int>& u, const solver::Covariance& cov) {
+  auto leave_out_run = [&](const std::vector<int>& u, const solver::Covariance& cov,
+                           const detail::TreeCrossCovariance& cross) {
     const int n = static_cast<int>(u.size());
     const int len_max = run_limit(n);
     if (len_max < 2) return false;
@@ -344,14 +441,22 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       rh[q] = (anchors[j].y_w - V[j].inverse().translation()).head<2>();
       rw[q] = w2[q] * rh[q];
     }
-    auto Qu = [&](int qa, int qb) {  // Cov(r_a, r_b), horizontal
-      const int a = u[qa], b = u[qb];
-      Eigen::Matrix2d X = -(qa == qb ? centre_cov(V[a], V[a], cov.block(&V[a]))
-                                     : centre_cov(V[a], V[b], cov.block(&V[a], &V[b])))
-                               .topLeftCorner<2, 2>();
-      if (qa == qb) X += sigma[a] * sigma[a] * Eigen::Matrix2d::Identity();
-      return X;
-    };
+    // Cov(r_a, r_b) of anchors up to a run apart (horizontal), each row in one walk.
+    std::vector<std::vector<Eigen::Matrix2d>> near(n);
+    std::vector<int> bs;
+    std::vector<detail::TreeCrossCovariance::Mat7> row;
+    for (int q = 0; q < n; ++q) {
+      const int a = u[q];
+      bs.clear();
+      for (int d = 1; d < len_max + 1 && q + d < n; ++d) bs.push_back(u[q + d]);
+      cross.row(a, bs, &row);
+      near[q].resize(bs.size() + 1);
+      near[q][0] = sigma[a] * sigma[a] * Eigen::Matrix2d::Identity() -
+                   centre_cov(V[a], V[a], cov.block(&V[a])).topLeftCorner<2, 2>();
+      for (std::size_t d = 1; d <= bs.size(); ++d)
+        near[q][d] = -centre_cov(V[a], V[bs[d - 1]], row[d - 1]).topLeftCorner<2, 2>();
+    }
+    auto Qu = [&](int qa, int qb) { return near[qa][qb - qa]; };  // qa <= qb
     auto Q = [&](int qa, int qb) { return Eigen::Matrix2d(w2[qa] * w2[qb] * Qu(qa, qb)); };
     // A run starts and ends with a step: the residual jumps between the last correct anchor and
     // the first of the run, and back after its last, where a stretch the path drifted away
@@ -440,26 +545,18 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       for (auto& a : out.anchors) a = ScreenedAnchor{};
       return done(false, "the screening graph's solve failed (" + sum.message + ")");
     }
+    // Every view's and keyframe's covariance, and the blocks the views' cross-covariances
+    // come from (step 4's stretches, the pair test below).
     std::vector<const void*> wanted;
-    for (int j = 0; j < na; ++j) wanted.push_back(&V[j]);
-    // Cross-covariances of consecutive left-out anchors (their pair test below).
     std::vector<solver::Covariance::Pair> pairs;
-    for (int q = 0; q + 1 < na; ++q)
-      if (!out.anchors[order[q]].used && !out.anchors[order[q + 1]].used)
-        pairs.emplace_back(&V[order[q]], &V[order[q + 1]]);
-    // ... and of anchors in use up to a run apart (step 4's stretches).
+    detail::TreeCrossCovariance::request(S, V, kf_of, &wanted, &pairs);
     std::vector<int> in_use_order;
-    if (options.max_run_anchors >= 2) {
+    if (options.max_run_anchors >= 2)
       for (int j : order)
         if (out.anchors[j].used) in_use_order.push_back(j);
-      const int n = static_cast<int>(in_use_order.size());
-      const int len = run_limit(n);
-      for (int q = 0; len >= 2 && q < n; ++q)
-        for (int d = 1; d < len && q + d < n; ++d)
-          pairs.emplace_back(&V[in_use_order[q]], &V[in_use_order[q + d]]);
-    }
     solver::Covariance cov;
-    if (!cov.compute(problem, wanted, pairs, &why)) {
+    detail::TreeCrossCovariance cross;
+    if (!cov.compute(problem, wanted, pairs, &why) || !cross.build(cov, S, V, kf_of, &why)) {
       for (auto& a : out.anchors) a = ScreenedAnchor{};
       return done(false, "the anchors do not determine the path (" + why +
                              "): none can be tested against the others");
@@ -508,7 +605,7 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     if (in_use < 3) break;
     // Runs first, at the model's nominal drift: a run's anchors vouch for each other, while
     // the correct anchors at its ends look wrong and would go one by one.
-    if (!estimate_k && !in_use_order.empty() && leave_out_run(in_use_order, cov)) continue;
+    if (!estimate_k && !in_use_order.empty() && leave_out_run(in_use_order, cov, cross)) continue;
     // Leave out the worst inconsistent anchors: T above the threshold and the largest among
     // the in-use neighbours (in keyframe order).
     std::vector<int> leave;
@@ -596,7 +693,7 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       const Eigen::Vector2d d = ((anchors[b].y_w - anchors[a].y_w) - (cb - ca)).head<2>();
       const Eigen::Matrix3d Caa = centre_cov(V[a], V[a], cov.block(&V[a]));
       const Eigen::Matrix3d Cbb = centre_cov(V[b], V[b], cov.block(&V[b]));
-      const Eigen::Matrix3d Cab = centre_cov(V[a], V[b], cov.block(&V[a], &V[b]));
+      const Eigen::Matrix3d Cab = centre_cov(V[a], V[b], cross(a, b));
       const Eigen::Matrix2d W =
           (Caa + Cbb - Cab - Cab.transpose()).topLeftCorner<2, 2>() +
           (sigma[a] * sigma[a] + sigma[b] * sigma[b]) * Eigen::Matrix2d::Identity();
@@ -605,7 +702,7 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
       readmit_anchor(b);
     }
     // Runs again at the data's drift level: a short run the nominal drift absorbs stands out.
-    if (!changed && !in_use_order.empty()) changed = leave_out_run(in_use_order, cov);
+    if (!changed && !in_use_order.empty()) changed = leave_out_run(in_use_order, cov, cross);
     if (!changed) break;
   }
   out.drift_factor = k;
