@@ -501,9 +501,11 @@ TEST_CASE("Geo-tags seen from several keyframes: a wrong one leaves with all its
                                << " correct, misplaced one used " << sc.anchors[misplaced].used
                                << "; mean 2D error " << e_bad << " m (clean, by geo-tag: "
                                << e_clean << " m, " << sc_clean.num_left_out() << " left out)");
-  // The test has teeth: one by one, a geo-tag's localizations agree with each other, the drift
-  // level estimated from them is too low, and the stiff path throws out correct ones.
-  CHECK(naive_r > 3 * r);
+  // The test has teeth: one by one, a wrong geo-tag's localizations agree with each other and
+  // vouch for each other, and most stay (before the drift level's fixed point was bracketed, k
+  // cycled, stopped low, and the stiff path also threw out over three times as many correct
+  // localizations as the test by geo-tag; now 5 against its 6).
+  CHECK(naive_w <= num_wrong / 2);
   CHECK(w == num_wrong);
   CHECK(r <= 6);  // two geo-tags' worth
   CHECK(!sc.anchors[misplaced].used);
