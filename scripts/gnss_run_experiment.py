@@ -4,7 +4,8 @@
 For each stretch (docs/vo_drift.md says how /work/vo_data was made): the VO's keyframes, fixes
 every 10 frames from the ground truth with 2 m of horizontal and 3 m of vertical noise
 (sigma_m 2), then the same fixes with a run of consecutive ones shifted together (8 fixes by
-(25, 15) m, 15 fixes by (-20, 30) m, from the 41st fix on), and each run's fixes dropped (what
+(25, 15) m, 15 fixes by (-20, 30) m, from the 41st fix on; 6 fixes by (30, -10) m from the
+first, a receiver's cold start; the last 10 by (-15, -25) m), and each run's fixes dropped (what
 knowing them would give). `geodrift correct` (default screening) and `geodrift eval` against
 the ground truth; prints the mean and largest 2D error and the fixes left out.
 
@@ -21,9 +22,14 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 K = os.path.join(ROOT, "data", "kitti")
-CASES = [("clean", None, None, False), ("8 in a row off", 8, (25, 15), False),
-         ("8 in a row dropped", 8, (25, 15), True), ("15 in a row off", 15, (-20, 30), False),
-         ("15 in a row dropped", 15, (-20, 30), True)]
+# (name, run length, shift, dropped instead, first fix of the run; negative: from the end)
+CASES = [("clean", 0, None, False, 0), ("8 in a row off", 8, (25, 15), False, 40),
+         ("8 in a row dropped", 8, (25, 15), True, 40),
+         ("15 in a row off", 15, (-20, 30), False, 40),
+         ("15 in a row dropped", 15, (-20, 30), True, 40),
+         ("first 6 off", 6, (30, -10), False, 0), ("first 6 dropped", 6, (30, -10), True, 0),
+         ("last 10 off", 10, (-15, -25), False, -10),
+         ("last 10 dropped", 10, (-15, -25), True, -10)]
 
 
 def main():
@@ -47,13 +53,15 @@ def main():
         gt = f"{work}/{st}_gt.txt"
         open(gt, "w").write("".join(f"{f} 1 0 0 {w[first + f][0]} 0 1 0 {w[first + f][1]} "
                                     f"0 0 1 {w[first + f][2]}\n" for f in range(n)))
-        for name, length, shift, drop in CASES:
+        fixes = range(0, n, 10)
+        for name, length, shift, drop, start in CASES:
+            start = start if start >= 0 else len(fixes) + start
             rng = random.Random(5)
             rows = ["frame,x,y,z,sigma_m"]
-            for i, f in enumerate(range(0, n, 10)):
+            for i, f in enumerate(fixes):
                 x, y, z = w[first + f]
                 x, y, z = x + rng.gauss(0, 2), y + rng.gauss(0, 2), z + rng.gauss(0, 3)
-                if length and 40 <= i < 40 + length:
+                if start <= i < start + length:
                     if drop:
                         continue
                     x, y = x + shift[0], y + shift[1]

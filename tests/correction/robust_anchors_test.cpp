@@ -233,9 +233,14 @@ TEST_CASE("Screening leaves out a run of anchors off together, and nothing on cl
   INFO("clean: mean 2D error " << clean.mean_2d << " m, left out " << sc.num_left_out());
   CHECK(in_runs == 0);
   CHECK(sc.num_left_out() <= 2);
+  const int n = static_cast<int>(corr.size());
+  // Mid-path, and at the path's start (a receiver's cold start) and end, where a run has one
+  // edge only.
   for (const auto& [first, length, offset] :
        {std::tuple<int, int, Eigen::Vector3d>{40, 8, {25, 15, 0}},
-        std::tuple<int, int, Eigen::Vector3d>{60, 15, {-20, 30, 0}}}) {
+        std::tuple<int, int, Eigen::Vector3d>{60, 15, {-20, 30, 0}},
+        std::tuple<int, int, Eigen::Vector3d>{0, 6, {30, -10, 0}},
+        std::tuple<int, int, Eigen::Vector3d>{n - 10, 10, {-15, -25, 0}}}) {
     std::vector<map::Correspondence> bad = corr;
     std::vector<int> run;
     for (int j = first; j < first + length; ++j) {

@@ -44,8 +44,9 @@
 ///      canyon, one capture run registered wrongly) vouch for each other in the test above, and
 ///      the correct anchors at the run's ends look wrong instead. Each stretch of 2 to
 ///      max_run_anchors consecutive anchors in use is tested for a common horizontal offset
-///      (leave_out_run below); one whose residuals step in and back out at both ends is left
-///      out whole and stays out. Before step 1's single anchors (a run left in sets k) and
+///      (leave_out_run below); one whose residuals step in and back out at both ends (at its
+///      inner end only, for a stretch that starts or ends the path: a receiver's cold start) is
+///      left out whole and stays out. Before step 1's single anchors (a run left in sets k) and
 ///      again when the rounds end (a short run the nominal drift absorbed).
 /// The probability is 0.99999 (threshold 23.0), not 0.999: the simulated and real drift is
 /// heavier-tailed than the Gaussian model in turns, and at 0.999 a clean run lost 2-4 % of its
@@ -424,7 +425,8 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   // "every anchor of W shifted alike") is
   //   w = Σ_W R⁻¹·r_h,  S = Σ_{i,j∈W} R⁻¹·Q_r,ij·R⁻¹ (horizontal blocks),  T = wᵀ·S⁻¹·w ~ χ²₂,
   // b̂ = S⁻¹·w. For one anchor T is the leave-one-out statistic above. Of the windows of 1 to
-  // run_limit anchors that step in and out at both ends among dense anchors (below), the one
+  // run_limit anchors that step in and out at both ends (the inner one at the path's start or
+  // end) among dense anchors (below), the one
   // with the largest T is the most likely offset stretch; it is left out when it has two or
   // more anchors and T passes the threshold raised for the number of windows tried
   // (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
@@ -485,12 +487,15 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     int best_q = -1, best_len = 0;
     Eigen::Vector2d best_b = Eigen::Vector2d::Zero();
     long windows = 0;
-    for (int q0 = 1; q0 < n; ++q0) {
-      bool all_dense = dense[q0 - 1];
+    for (int q0 = 0; q0 < n; ++q0) {
+      bool all_dense = q0 == 0 || dense[q0 - 1];
       Eigen::Vector2d w = Eigen::Vector2d::Zero();
       Eigen::Matrix2d S = Eigen::Matrix2d::Zero();
-      for (int len = 1; len <= len_max && q0 + len < n; ++len) {
+      for (int len = 1; len <= len_max && q0 + len <= n; ++len) {
         const int qb = q0 + len - 1;
+        // A stretch at the path's start or end (a GNSS receiver's cold start, the last fixes
+        // in a canyon) has one edge only, at its inner end.
+        const bool at_start = q0 == 0, at_end = qb == n - 1;
         w += rw[qb];
         S += Q(qb, qb);
         for (int q = q0; q < qb; ++q) {
@@ -500,12 +505,12 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
         windows += len >= 2;
         all_dense = all_dense && dense[qb];
         if (!all_dense) break;
-        if (!edge[q0] || !edge[qb + 1] || !dense[qb + 1]) continue;
+        if (!(at_start || edge[q0]) || !(at_end || (edge[qb + 1] && dense[qb + 1]))) continue;
         const Eigen::Matrix2d Ss = 0.5 * (S + S.transpose());
         if (!(Ss.determinant() > 0 && Ss.trace() > 0)) continue;
         const Eigen::Vector2d b = Ss.inverse() * w;
         // In with +b, out with -b.
-        if (!(jump[q0].dot(b) > 0 && jump[qb + 1].dot(b) < 0)) continue;
+        if (!((at_start || jump[q0].dot(b) > 0) && (at_end || jump[qb + 1].dot(b) < 0))) continue;
         const double T = w.dot(b);
         if (T > best) best = T, best_q = q0, best_len = len, best_b = b;
       }
