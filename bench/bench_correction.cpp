@@ -130,13 +130,7 @@ BENCHMARK(BM_Correct_Kitti02_Interval100)
 // 1: the defaults, the run test's stretches of up to 20 fixes, whose cross-covariances come
 // through the keyframes' chain (detail::TreeCrossCovariance).
 void BM_Screen_DenseFixes(benchmark::State& state) {
-  static const std::unique_ptr<sim::SimulatedSequence> s = [] {
-    const std::string dir = std::string(GEODRIFT_SOURCE_DIR) + "/data/kitti";
-    const sim::KittiSequence seq = sim::load_kitti_sequence(
-        dir + "/poses/02.txt", dir + "/calib_seq00-02.txt", dir + "/times/02.txt");
-    return std::make_unique<sim::SimulatedSequence>(
-        sim::simulate(seq, sim::SimOptions::kitti("02", 1)));
-  }();
+  const sim::SimulatedSequence* s = &scene_02_interval_100().sim;  // 02, seed 1
   std::vector<map::Correspondence> fixes =
       sim::kitti_correspondences(*s, static_cast<int>(state.range(0)));
   std::mt19937 rng(3);
