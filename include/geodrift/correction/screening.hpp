@@ -426,10 +426,9 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
   //   w = Σ_W R⁻¹·r_h,  S = Σ_{i,j∈W} R⁻¹·Q_r,ij·R⁻¹ (horizontal blocks),  T = wᵀ·S⁻¹·w ~ χ²₂,
   // b̂ = S⁻¹·w. For one anchor T is the leave-one-out statistic above. Of the windows of 1 to
   // run_limit anchors that step in and out at both ends (the inner one at the path's start or
-  // end) among dense anchors (below), the one
-  // with the largest T is the most likely offset stretch; it is left out when it has two or
-  // more anchors and T passes the threshold raised for the number of windows tried
-  // (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
+  // end) among dense anchors (below), the one with the largest T is the most likely offset
+  // stretch; it is left out when it has two or more anchors and T passes the threshold raised
+  // for the number of windows tried (Bonferroni: χ²₂ at 1 − (1 − probability)/M).
   auto leave_out_run = [&](const std::vector<int>& u, const solver::Covariance& cov,
                            const detail::TreeCrossCovariance& cross) {
     const int n = static_cast<int>(u.size());

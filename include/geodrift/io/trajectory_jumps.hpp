@@ -85,14 +85,15 @@ inline std::vector<TrajectoryJump> find_trajectory_jumps(const Trajectory& t,
   if (n < 3) return jumps;
   const char* unit = trajectory_time_unit(t);
   const bool seconds = unit[0] == 's', frames = unit[0] == 'f';
-  const auto centre = [&](std::size_t i) { return t.poses[i].T_cw.inverse().translation(); };
-  const auto representable = [](const Eigen::Vector3d& c) {
-    return c.allFinite() && c.cwiseAbs().maxCoeff() <= map::kMaxMapCoordinate;
-  };
-  const auto step = [&](std::size_t i) {  // poses i -> i + 1
-    const Eigen::Vector3d a = centre(i), b = centre(i + 1);
-    return representable(a) && representable(b) ? (b - a).norm()
-                                                : std::numeric_limits<double>::quiet_NaN();
+  // Each camera centre once (a step uses two); NaN where it is not representable.
+  std::vector<Eigen::Vector3d> centre(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    centre[i] = t.poses[i].T_cw.inverse().translation();
+    if (!(centre[i].allFinite() && centre[i].cwiseAbs().maxCoeff() <= map::kMaxMapCoordinate))
+      centre[i].setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
+  const auto step = [&](std::size_t i) {  // poses i -> i + 1; NaN from a centre left out
+    return (centre[i + 1] - centre[i]).norm();
   };
   const auto dt = [&](std::size_t i) {
     const TrajectoryPose &a = t.poses[i], &b = t.poses[i + 1];
