@@ -35,7 +35,8 @@
 ///      covariance is scaled by a factor k, the one at which the median of T over the anchors
 ///      in use is χ²₂'s median (2 ln 2); the median ignores wrong anchors while they are fewer
 ///      than half. Re-solved while k moves by more than 5 % (the k tried bracket the fixed
-///      point; a step out of the bracket bisects it), anchors above the threshold leaving.
+///      point; a step out of the bracket bisects it); once it has settled, anchors above the
+///      threshold leave as in 1 and k settles again for the anchors left.
 ///   3. A left-out anchor with T ≤ χ²₂(readmit_probability) returns; so do two consecutive
 ///      left-out anchors that agree with each other (their displacement matches the path's
 ///      between them: it was the path, bent in a turn, that disagreed with the rest; two wrong
@@ -612,6 +613,61 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     // Runs first, at the model's nominal drift: a run's anchors vouch for each other, while
     // the correct anchors at its ends look wrong and would go one by one.
     if (!estimate_k && !in_use_order.empty() && leave_out_run(in_use_order, cov, cross)) continue;
+    // Drift factor from the anchors in use: the f at which the median of T_j(f·P) is χ²₂'s.
+    // Settled before any single anchor leaves at it: the first step from a path that follows
+    // every anchor closely can go to min_factor (anchors with a σ well above their real
+    // noise: the residuals are small at any k), and leaving out at that k went on for
+    // dozens of rounds (110 of 233 exact anchors declared σ 1 m, a fix every 10 frames).
+    std::vector<int> tested;
+    if (estimate_k) {
+      for (int j = 0; j < na; ++j)
+        if (out.anchors[j].used && out.anchors[j].testable) tested.push_back(j);
+      double f = 1.0;
+      if (tested.size() >= 3) {
+        std::vector<double> z(tested.size());
+        auto median_T = [&](double g) {
+          for (std::size_t q = 0; q < tested.size(); ++q) {
+            const int j = tested[q];
+            z[q] = e[j].dot((g * Ph[j] + Rh[j]).ldlt().solve(e[j]));
+          }
+          std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
+          return z[z.size() / 2];
+        };
+        const double target = detail::chi2_2_quantile(0.5);
+        double lo_f = std::log(options.min_factor / k), hi_f = std::log(options.max_factor / k);
+        if (median_T(std::exp(lo_f)) <= target) {
+          f = std::exp(lo_f);
+        } else if (median_T(std::exp(hi_f)) >= target) {
+          f = std::exp(hi_f);
+        } else {
+          for (int it = 0; it < 60; ++it) {
+            const double mid = 0.5 * (lo_f + hi_f);
+            (median_T(std::exp(mid)) > target ? lo_f : hi_f) = mid;
+          }
+          f = std::exp(0.5 * (lo_f + hi_f));
+        }
+      }
+      // k is the fixed point of k -> k·f(k), each k re-solved. On dense anchors that map
+      // overshoots (a larger k lets the path follow the anchors: smaller residuals and larger
+      // predictions, T shrinks twice over) and k·f alone cycled (0.41 -> 0.63 -> 0.41 ... until
+      // max_rounds, a fix every 10 frames on simulated 02). f > 1 puts the fixed point above this
+      // k, f < 1 below, so the k tried bracket it (per set of anchors in use) and a step out of
+      // the bracket bisects it in log k instead: within 5 % in a few rounds.
+      if (std::abs(std::log(f)) > std::log(1.05)) {
+        std::vector<char> use_now = used_mask();
+        if (use_now != bracket_use) {
+          bracket_use.swap(use_now);
+          k_lo = 0;
+          k_hi = std::numeric_limits<double>::infinity();
+        }
+        (f > 1 ? k_lo : k_hi) = k;
+        if (!(k_hi <= 1.05 * k_lo)) {
+          const double next = k * f;
+          k = next > k_lo && next < k_hi ? next : std::sqrt(k_lo * k_hi);
+          continue;  // re-solve at the new drift level before deciding
+        }
+      }
+    }
     // Leave out the worst inconsistent anchors: T above the threshold and the largest among
     // the in-use neighbours (in keyframe order).
     std::vector<int> leave;
@@ -639,55 +695,6 @@ inline AnchorScreening screen_anchors(const std::vector<map::Keyframe>& keyframe
     if (!estimate_k) {
       estimate_k = true;  // the grossly wrong anchors are out: k from the rest from now on
       continue;
-    }
-    // Drift factor from the anchors in use: the f at which the median of T_j(f·P) is χ²₂'s.
-    std::vector<int> tested;
-    for (int j = 0; j < na; ++j)
-      if (out.anchors[j].used && out.anchors[j].testable) tested.push_back(j);
-    double f = 1.0;
-    if (tested.size() >= 3) {
-      std::vector<double> z(tested.size());
-      auto median_T = [&](double g) {
-        for (std::size_t q = 0; q < tested.size(); ++q) {
-          const int j = tested[q];
-          z[q] = e[j].dot((g * Ph[j] + Rh[j]).ldlt().solve(e[j]));
-        }
-        std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
-        return z[z.size() / 2];
-      };
-      const double target = detail::chi2_2_quantile(0.5);
-      double lo_f = std::log(options.min_factor / k), hi_f = std::log(options.max_factor / k);
-      if (median_T(std::exp(lo_f)) <= target) {
-        f = std::exp(lo_f);
-      } else if (median_T(std::exp(hi_f)) >= target) {
-        f = std::exp(hi_f);
-      } else {
-        for (int it = 0; it < 60; ++it) {
-          const double mid = 0.5 * (lo_f + hi_f);
-          (median_T(std::exp(mid)) > target ? lo_f : hi_f) = mid;
-        }
-        f = std::exp(0.5 * (lo_f + hi_f));
-      }
-    }
-    // k is the fixed point of k -> k·f(k), each k re-solved. On dense anchors that map
-    // overshoots (a larger k lets the path follow the anchors: smaller residuals and larger
-    // predictions, T shrinks twice over) and k·f alone cycled (0.41 -> 0.63 -> 0.41 ... until
-    // max_rounds, a fix every 10 frames on simulated 02). f > 1 puts the fixed point above this
-    // k, f < 1 below, so the k tried bracket it (per set of anchors in use) and a step out of
-    // the bracket bisects it in log k instead: within 5 % in a few rounds.
-    if (std::abs(std::log(f)) > std::log(1.05)) {
-      std::vector<char> use_now = used_mask();
-      if (use_now != bracket_use) {
-        bracket_use.swap(use_now);
-        k_lo = 0;
-        k_hi = std::numeric_limits<double>::infinity();
-      }
-      (f > 1 ? k_lo : k_hi) = k;
-      if (!(k_hi <= 1.05 * k_lo)) {
-        const double next = k * f;
-        k = next > k_lo && next < k_hi ? next : std::sqrt(k_lo * k_hi);
-        continue;  // re-solve at the new drift level before deciding
-      }
     }
     // Left-out anchors consistent with the rest return.
     auto readmit_anchor = [&](int j) {
