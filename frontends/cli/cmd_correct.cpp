@@ -106,6 +106,12 @@ options
                       are denser than every ~10 keyframes, e.g. street-view panoramas every
                       few metres; 0 keeps exactly the paper's window of the newest 3 anchors);
                       an integer in [0, 1000000]
+  --fixed-windows     keep every window as above. By default a window whose solution leaves
+                      one of its own anchors outside its sigma_m (chi-square, 99.9 %) is run
+                      again over twice as many keyframes (up to 4 times): the keyframes before
+                      a window are held fixed, and with metre-level anchors (GNSS) and a map
+                      they hold it to a heading its anchors cannot turn
+                      (docs/correction_model.md)
   --ba-min-parallax DEG
                       bundle adjustment leaves out map points whose rays from the window's
                       keyframes span less than DEG degrees (they move with their reference
@@ -225,7 +231,7 @@ int run_correct(int argc, char** argv) {
        "links", "weights", "local-scale", "first-window", "min-window-keyframes", "ba-min-parallax",
        "ba-cost-tolerance-sd", "anchor-time-offset", "out"},
       {"help", "force", "gate-anchors", "no-screen-anchors", "no-uncertainty", "allow-jumps",
-       "allow-upside-down"});
+       "allow-upside-down", "fixed-windows"});
   if (args.flag("help")) {
     std::fputs(kCorrectHelp, stdout);
     return 0;
@@ -277,6 +283,7 @@ int run_correct(int argc, char** argv) {
     throw UsageError("--min-window-keyframes must be an integer in [0, 1000000], not " +
                      args.get("min-window-keyframes"));
   opt.min_window_keyframes = static_cast<int>(min_window);
+  opt.adaptive_windows = !args.flag("fixed-windows");
   opt.ba_min_parallax_deg = number_option(args, "ba-min-parallax", opt.ba_min_parallax_deg);
   opt.ba_cost_tolerance_sd = number_option(args, "ba-cost-tolerance-sd", opt.ba_cost_tolerance_sd);
   if (!(opt.ba_min_parallax_deg >= 0 && opt.ba_min_parallax_deg < 90))
@@ -808,6 +815,7 @@ int run_correct(int argc, char** argv) {
       << ", \"ba_huber_px\": " << json_num(opt.ba_huber_px)
       << ", \"first_window\": " << io::detail::json_string(first_window)
       << ", \"min_window_keyframes\": " << opt.min_window_keyframes
+      << ", \"adaptive_windows\": " << (opt.adaptive_windows ? "true" : "false")
       << ", \"ba_min_parallax_deg\": " << json_num(opt.ba_min_parallax_deg)
       << ", \"ba_cost_tolerance_sd\": " << json_num(opt.ba_cost_tolerance_sd) << "}"
       << ",\n  \"counts\": {\"poses\": " << np << ", \"keyframes\": " << nk
@@ -853,6 +861,7 @@ int run_correct(int argc, char** argv) {
       << ",\n  \"anchor_residuals_m\": " << residuals
       << ",\n  \"drift_factor\": " << json_num(corrector.drift_factor())
       << ",\n  \"rejected_window_updates\": " << corrector.rejected_window_updates()
+      << ",\n  \"grown_windows\": " << corrector.grown_windows()
       << ",\n  \"scale_spread\": " << json_num(scale_spread)
       << ",\n  \"screening\": {\"enabled\": " << (screen ? "true" : "false")
       << ", \"ok\": " << (screening.ok ? "true" : "false")

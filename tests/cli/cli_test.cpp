@@ -449,7 +449,7 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(json_numbers(rep, "min_window_keyframes")[0] == 30);
     const Run c = run("correct " + in + " " + map +
                       " --first-window paper --ba-min-parallax 0 --ba-cost-tolerance-sd 1000"
-                      " --min-window-keyframes 0"
+                      " --min-window-keyframes 0 --fixed-windows"
                       " --out " +
                       t.file("opts"));
     INFO(c.output);
@@ -459,6 +459,10 @@ TEST_CASE("simulate -> correct -> eval on KITTI 02: correction beats INIT only",
     CHECK(json_numbers(rep2, "ba_min_parallax_deg")[0] == 0.0);
     CHECK(json_numbers(rep2, "ba_cost_tolerance_sd")[0] == 1000.0);
     CHECK(json_numbers(rep2, "min_window_keyframes")[0] == 0);
+    CHECK(rep.find("\"adaptive_windows\": true") != std::string::npos);
+    CHECK(rep2.find("\"adaptive_windows\": false") != std::string::npos);
+    REQUIRE(json_numbers(rep, "grown_windows").size() == 1);
+    CHECK(json_numbers(rep2, "grown_windows")[0] == 0);
     // Default: some BA window leaves low-parallax points out; with 0 none does.
     const auto skipped = json_numbers(rep, "skipped_points");
     const auto skipped2 = json_numbers(rep2, "skipped_points");
