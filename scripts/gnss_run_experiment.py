@@ -10,7 +10,12 @@ knowing them would give). `geodrift correct` (default screening) and `geodrift e
 the ground truth; prints the mean and largest 2D error and the fixes left out.
 
   GEODRIFT=build/frontends/cli/geodrift scripts/gnss_run_experiment.py \\
-      [--data /work/vo_data] [--stretches 02_0000_0899]
+      [--data /work/vo_data] [--stretches 02_0000_0899] [--map] [--cases clean] \\
+      [--correct-args "--fixed-windows"]
+
+--map corrects with the VO's COLMAP map (<stretch>/vo/model) too; --cases runs only the named
+cases (comma-separated: clean, "8 in a row off", ...); --correct-args passes further options to
+`geodrift correct`.
 """
 import argparse
 import json
@@ -37,6 +42,9 @@ def main():
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default="/work/vo_data")
     ap.add_argument("--stretches", default="02_0000_0899")
+    ap.add_argument("--map", action="store_true")
+    ap.add_argument("--cases", default="")
+    ap.add_argument("--correct-args", default="")
     a = ap.parse_args()
     g = os.environ.get("GEODRIFT", os.path.join(ROOT, "build", "frontends", "cli", "geodrift"))
     work = tempfile.mkdtemp(prefix="gnss_run_")
@@ -54,7 +62,8 @@ def main():
         open(gt, "w").write("".join(f"{f} 1 0 0 {w[first + f][0]} 0 1 0 {w[first + f][1]} "
                                     f"0 0 1 {w[first + f][2]}\n" for f in range(n)))
         fixes = range(0, n, 10)
-        for name, length, shift, drop, start in CASES:
+        cases = [c for c in CASES if not a.cases or c[0] in a.cases.split(",")]
+        for name, length, shift, drop, start in cases:
             start = start if start >= 0 else len(fixes) + start
             rng = random.Random(5)
             rows = ["frame,x,y,z,sigma_m"]
@@ -69,7 +78,9 @@ def main():
             an, out = f"{work}/anchors.csv", f"{work}/out"
             open(an, "w").write("\n".join(rows) + "\n")
             r = subprocess.run([g, "correct", "--trajectory", traj, "--anchors", an, "--origin",
-                                "49.0110,8.4170,160", "--no-uncertainty", "--out", out, "--force"],
+                                "49.0110,8.4170,160", "--no-uncertainty", "--out", out, "--force"] +
+                               (["--map", f"{a.data}/{st}/vo/model"] if a.map else []) +
+                               a.correct_args.split(),
                                capture_output=True, text=True)
             if r.returncode != 0:
                 print(f"{st} | {name} | refused: {r.stderr.strip().splitlines()[-1][:100]}")
