@@ -14,7 +14,8 @@ using namespace geodrift;
 
 namespace {
 double mean_2d_error(const sim::SimulatedSequence& s, const std::vector<map::Correspondence>& corr,
-                     correction::Mode mode, int min_window_keyframes, bool adaptive = false) {
+                     correction::Mode mode, int min_window_keyframes, bool adaptive = false,
+                     int* grown = nullptr) {
   correction::CorrectorOptions opt;
   opt.mode = mode;
   opt.min_window_keyframes = min_window_keyframes;
@@ -22,6 +23,7 @@ double mean_2d_error(const sim::SimulatedSequence& s, const std::vector<map::Cor
   correction::Corrector c(opt);
   correction::replay(s.map, corr, &c);
   REQUIRE(c.initialized());
+  if (grown) *grown = c.grown_windows();
   std::vector<Eigen::Vector3d> centres;
   for (int i = 0; i < c.num_keyframes(); ++i) centres.push_back(c.keyframe_center_w(i));
   return eval::horizontal_errors(centres, s.gt_center_w).all.mean;
@@ -74,22 +76,10 @@ TEST_CASE("GNSS-like fixes with a map: a window grows until its own anchors hold
     fixes.push_back(c);
   }
   REQUIRE(fixes.size() >= 100);
-  auto run = [&](correction::Mode mode, bool adaptive, int* grown) {
-    correction::CorrectorOptions opt;
-    opt.mode = mode;
-    opt.adaptive_windows = adaptive;
-    correction::Corrector c(opt);
-    correction::replay(s.map, fixes, &c);
-    REQUIRE(c.initialized());
-    if (grown) *grown = c.grown_windows();
-    std::vector<Eigen::Vector3d> centres;
-    for (int i = 0; i < c.num_keyframes(); ++i) centres.push_back(c.keyframe_center_w(i));
-    return eval::horizontal_errors(centres, s.gt_center_w).all.mean;
-  };
   int grown = 0;
-  const double fixed = run(correction::Mode::kOurs, false, nullptr);
-  const double adaptive = run(correction::Mode::kOurs, true, &grown);
-  const double batch = run(correction::Mode::kFullBatch, true, nullptr);
+  const double fixed = mean_2d_error(s, fixes, correction::Mode::kOurs, 30, false);
+  const double adaptive = mean_2d_error(s, fixes, correction::Mode::kOurs, 30, true, &grown);
+  const double batch = mean_2d_error(s, fixes, correction::Mode::kFullBatch, 30, true);
   INFO("mean 2D error: Ours with fixed windows " << fixed << " m, adaptive " << adaptive << " m ("
                                                  << grown << " grown), batch " << batch << " m");
   CHECK(adaptive < 0.5 * fixed);
